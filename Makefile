@@ -1,0 +1,49 @@
+# Two commands do everything on a fresh Debian machine with Python 3.11:
+#   make run   - build the dataset and the executed tutorial as a static site
+#   make test  - lint, unit tests and notebook regression tests (nbval)
+# Both create .venv and install what is missing first.
+
+PYTHON ?= python3.11
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+# Debian package : shared library it provides (checked with ldconfig)
+SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
+
+.PHONY: run test lint notebooks html sysdeps setup clean
+
+run: $(STAMP)
+	$(PY) -m helpers dataset --out build/dataset
+	$(PY) -m helpers site --out build/html
+
+test: $(STAMP)
+	$(VENV)/bin/ruff check helpers tests benchmarks
+	$(VENV)/bin/ruff format --check helpers tests benchmarks
+	$(VENV)/bin/pytest
+
+setup: $(STAMP)
+
+$(STAMP): environment.txt pyproject.toml | sysdeps
+	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found; install Python 3.11 (Debian: apt-get install python3.11 python3.11-venv)" >&2; exit 1; }
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -r environment.txt
+	$(PY) -m pip install --quiet --no-deps -e .
+	touch $(STAMP)
+
+sysdeps:
+	@missing=""; for dep in $(SYSDEPS); do \
+	  pkg=$${dep%%:*}; lib=$${dep#*:}; \
+	  ldconfig -p 2>/dev/null | grep -q "$$lib" || missing="$$missing $$pkg"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian packages:$$missing"; \
+	    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends $$missing >/dev/null; \
+	  else \
+	    echo "error: missing Debian package(s):$$missing; run: sudo apt-get install$$missing" >&2; exit 1; \
+	  fi; \
+	fi
+
+clean:
+	rm -rf build data/cache .pytest_cache

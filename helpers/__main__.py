@@ -1,0 +1,73 @@
+"""Command line: ``python -m helpers dataset|site ...``.
+
+Errors in the input end in one line on stderr and exit code 2, never a
+traceback, and never a half-written output folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+
+from .errors import SlamError
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m helpers", description=__doc__.splitlines()[0])
+    parser.add_argument("-v", "--verbose", action="store_true", help="log what each stage does")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    ds = sub.add_parser("dataset", help="simulate the lidar scans of a flight over a map")
+    _map_arguments(ds)
+    ds.add_argument("--out", required=True, help="output folder (scans/, poses_gt.txt, map_gt.ply)")
+
+    site = sub.add_parser("site", help="execute the notebooks and export them as a static HTML site")
+    site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
+    site.add_argument("--no-execute", action="store_true", help="export the notebooks as committed")
+
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING, format="%(levelname)s %(message)s")
+    try:
+        if args.command == "dataset":
+            return _dataset(args)
+        if args.command == "site":
+            from .site import build_site
+
+            index = build_site(args.out, execute=not args.no_execute)
+            print(f"site written: {index}")
+            return 0
+    except SlamError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("error: interrupted", file=sys.stderr)
+        return 130
+    return 1
+
+
+def _map_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--map", help=".las, .laz or .tar.gz holding one (default: the embedded scene)")
+    parser.add_argument("--waypoints", help=".mat with gTruthTraj or .csv of x,y[,z] (default: a loop)")
+    parser.add_argument("--config", help="TOML file with [sensor] (and later [slam]) tables")
+
+
+def _dataset(args) -> int:
+    from .config import load_config
+    from .dataset import create_dataset, write_dataset
+
+    config = load_config(args.config)
+    start = time.perf_counter()
+    data = create_dataset(args.map, args.waypoints, config.sensor, progress=sys.stderr.isatty())
+    out = write_dataset(data, args.out, progress=sys.stderr.isatty())
+    points = sum(len(s) for s in data.scans)
+    print(
+        f"{len(data)} scans ({points / len(data):.0f} points each on average) of {data.name} "
+        f"written to {out} in {time.perf_counter() - start:.1f} s"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,199 @@
+"""Every tunable value of the project, in one place.
+
+The defaults are the reference workflow's values. A TOML file can override
+any of them, table by table::
+
+    [sensor]
+    altitude = 700.0                 # flight height, m, in the map frame
+    azimuth = [-13.0, 13.0, 0.08]    # across track: start, stop, step, deg
+    elevation = [-2.5, 2.5, 0.2]     # along track: start, stop, step, deg
+
+Unknown tables or keys and out-of-range values are refused at load time
+with one sentence saying which and why.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .errors import SlamError
+
+
+@dataclass(frozen=True)
+class SensorConfig:
+    """The simulated lidar and how it flies."""
+
+    altitude: float = 700.0  # m, constant flight height (z in the map frame)
+    azimuth: tuple[float, float, float] = (-13.0, 13.0, 0.08)  # deg, across track
+    elevation: tuple[float, float, float] = (-2.5, 2.5, 0.2)  # deg, along track
+    max_range: float = 800.0  # m, returns farther than this are lost
+    range_noise: float = 0.02  # m, standard deviation of the range error
+    dropout: float = 0.01  # probability that a ray gives no return
+    seed: int = 0  # seed of the range noise and dropouts
+
+    def __post_init__(self):
+        for name in ("azimuth", "elevation"):
+            start, stop, step = _triple(self, name)
+            if not (-89.0 < start <= stop < 89.0) or step <= 0:
+                raise SlamError(
+                    f"[sensor] {name} must be [start, stop, step] degrees with "
+                    f"-89 < start <= stop < 89 and step > 0, got {list(getattr(self, name))}"
+                )
+        _check(self, "altitude", lambda v: math.isfinite(v), "a finite number of metres")
+        _check(self, "max_range", lambda v: v > 0, "a positive number of metres")
+        _check(self, "range_noise", lambda v: v >= 0, "zero or a positive number of metres")
+        _check(self, "dropout", lambda v: 0 <= v < 1, "a probability in [0, 1)")
+        if not isinstance(self.seed, int) or self.seed < 0:
+            raise SlamError(f"[sensor] seed must be a non-negative integer, got {self.seed!r}")
+
+
+METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
+
+
+@dataclass(frozen=True)
+class SlamConfig:
+    """The SLAM pipeline (the reference's parameter block, in snake_case)."""
+
+    # Registration (stage 3)
+    skip_frames: int = 3  # register every 3rd scan: the "accepted" scans
+    grid_step: float = 1.5  # m, grid-average downsampling cell before features
+    neighbors: int = 60  # nearest neighbours for normals and FPFH
+    match_threshold: float = 0.1  # largest normalised descriptor distance of a match
+    match_ratio: float = 0.97  # ratio test: best / second-best distance must be below it
+    max_distance: float = 1.0  # m, inlier distance of the robust rigid fit (MSAC)
+    max_num_trials: int = 3000  # hypotheses drawn by the robust fit
+    metric: str = "plane-to-plane"  # ICP metric: point-to-point, point-to-plane, plane-to-plane
+    inlier_distance: float = 3.0  # m, ICP ignores correspondences farther than this
+    seed: int = 0  # seed of the robust fit's sampling
+    # Mapping and loop closure (stages 4-5)
+    align_grid_step: float = 1.2  # m, grid of the merge that builds submaps and the map
+    loop_closure_search_radius: float = 7.9  # m, submaps whose centre is nearer are candidates
+    n_scans_per_submap: int = 3  # accepted scans per submap
+    sub_map_thresh: int = 15  # the most recent submaps are never loop candidates
+    loop_closure_threshold: float = 0.6  # ICP RMSE below which a submap matches
+    rmse_threshold: float = 0.6  # ICP RMSE below which the best scan match becomes a loop edge
+
+    def __post_init__(self):
+        positive = ("grid_step", "max_distance", "inlier_distance", "align_grid_step")
+        positive += ("loop_closure_search_radius", "loop_closure_threshold", "rmse_threshold")
+        for name in positive:
+            _check(self, name, lambda v: math.isfinite(v) and v > 0, "a positive number")
+        for name in ("skip_frames", "max_num_trials", "n_scans_per_submap"):
+            _check(self, name, lambda v: v >= 1, "an integer of at least 1")
+        _check(self, "neighbors", lambda v: v >= 3, "an integer of at least 3")
+        _check(self, "sub_map_thresh", lambda v: v >= 0, "zero or a positive integer")
+        _check(self, "seed", lambda v: v >= 0, "zero or a positive integer")
+        _check(self, "match_threshold", lambda v: 0 < v <= 1, "in (0, 1]")
+        _check(self, "match_ratio", lambda v: 0 < v <= 1, "in (0, 1]")
+        _check(self, "metric", lambda v: v in METRICS, f"one of {', '.join(METRICS)}")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole configuration, one table per stage."""
+
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    slam: SlamConfig = field(default_factory=SlamConfig)
+
+
+def load_config(path: str | Path | None = None) -> Config:
+    """Read a TOML configuration; no path gives the reference defaults."""
+    if path is None:
+        return Config()
+    path = Path(path)
+    if not path.is_file():
+        raise SlamError(f"config file not found: {path}")
+    try:
+        data = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise SlamError(f"config file {path} is not valid TOML: {exc}") from None
+    return config_from_dict(data, source=str(path))
+
+
+def config_from_dict(data: dict, source: str = "config") -> Config:
+    """Build a :class:`Config` from nested dictionaries, refusing unknown keys."""
+    tables = {f.name: f.type for f in dataclasses.fields(Config)}
+    unknown = sorted(set(data) - set(tables))
+    if unknown:
+        raise SlamError(f"{source}: unknown table(s) {unknown}; known tables are {sorted(tables)}")
+    parts = {}
+    for f in dataclasses.fields(Config):
+        table = data.get(f.name, {})
+        if not isinstance(table, dict):
+            raise SlamError(f"{source}: [{f.name}] must be a table")
+        parts[f.name] = _build(f.default_factory, table, f"{source} [{f.name}]")
+    return Config(**parts)
+
+
+def config_to_dict(config: Config) -> dict:
+    """The configuration as plain nested dictionaries (for JSON or TOML)."""
+    return {name: _plain(value) for name, value in dataclasses.asdict(config).items()}
+
+
+def _build(cls, table: dict, where: str):
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        raise SlamError(f"{where}: unknown key(s) {unknown}; known keys are {sorted(fields)}")
+    values = {}
+    for key, value in table.items():
+        default = getattr(cls(), key)
+        values[key] = _coerce(value, default, f"{where} {key}")
+    return cls(**values)
+
+
+def _coerce(value, default, where: str):
+    """Give ``value`` the type of ``default``, or explain why it cannot have it."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise SlamError(f"{where} must be true or false, got {value!r}")
+        return value
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise SlamError(f"{where} must be an integer, got {value!r}")
+        return value
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise SlamError(f"{where} must be a number, got {value!r}")
+        return float(value)
+    if isinstance(default, tuple):
+        if not isinstance(value, list) or len(value) != len(default):
+            raise SlamError(f"{where} must be a list of {len(default)} numbers, got {value!r}")
+        return tuple(_coerce(v, d, where) for v, d in zip(value, default, strict=True))
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise SlamError(f"{where} must be a string, got {value!r}")
+        return value
+    raise TypeError(f"no coercion for {type(default).__name__}")  # a bug, not user input
+
+
+def _triple(obj, name: str) -> tuple[float, float, float]:
+    value = getattr(obj, name)
+    if len(value) != 3:
+        raise SlamError(f"[sensor] {name} must be [start, stop, step], got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def _check(obj, name: str, ok, expected: str) -> None:
+    value = getattr(obj, name)
+    if not ok(value):
+        raise SlamError(f"[{_table_of(obj)}] {name} must be {expected}, got {value!r}")
+
+
+def _table_of(obj) -> str:
+    for f in dataclasses.fields(Config):
+        if isinstance(obj, f.default_factory):
+            return f.name
+    return type(obj).__name__
+
+
+def _plain(value):
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value

@@ -1,0 +1,195 @@
+"""Stage 1: the dataset. One call turns a map and a flight into lidar scans
+with their ground-truth poses (the reference's ``helperCreateDataset``)."""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from . import paths
+from .config import SensorConfig
+from .errors import SlamError
+from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
+from .scene import HeightField, default_scene
+from .sensor import Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
+from .trajectory import write_tum
+from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
+
+log = logging.getLogger(__name__)
+
+DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"
+MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the reference's 1 m voxels)
+
+
+@dataclass
+class Dataset:
+    """Everything stage 1 produces."""
+
+    scans: list[np.ndarray]  # (Ni, 3) points per scan, sensor frame, m
+    poses: np.ndarray  # (N, 4, 4) ground-truth sensor poses in the map frame
+    waypoints: np.ndarray  # (N, 3) ground-truth positions (the poses' translations)
+    map_points: np.ndarray  # (M, 3) float32 union of every true (noise-free) hit: the ground-truth map
+    map_labels: np.ndarray  # (M,) class of each map point (see helpers.scene)
+    surface: HeightField  # the surface the rays were cast against
+    frame: MapFrame  # original map coordinates -> map frame
+    sensor: SensorConfig
+    name: str
+
+    def __len__(self) -> int:
+        return len(self.scans)
+
+    def scan_in_map(self, index: int) -> np.ndarray:
+        """Scan ``index`` moved into the map frame by its ground-truth pose."""
+        pose = self.poses[index]
+        return self.scans[index] @ pose[:3, :3].T + pose[:3, 3]
+
+
+@lru_cache(maxsize=2)
+def _default_surface() -> HeightField:
+    return default_scene()
+
+
+def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | None = None, progress=False) -> Dataset:
+    """Simulate one lidar scan per waypoint.
+
+    ``map_path``: a ``.las``/``.laz``, a ``.tar.gz`` holding one, or None for
+    the embedded default scene. ``waypoints_path``: ``.mat`` (``gTruthTraj``)
+    or ``.csv``, in the map's original coordinates; None flies the default
+    loop (the shipped one on the default scene, one fitted to the tile
+    otherwise). ``progress``: show a progress bar while casting.
+    """
+    sensor = sensor or SensorConfig()
+    if map_path is None:
+        field, frame, name = _default_surface(), IDENTITY_FRAME, "default scene"
+    else:
+        tile = read_map(map_path)
+        field, frame, name = height_field_from_points(tile.points, tile.labels, MAP_CELL), tile.frame, tile.source
+
+    if waypoints_path is not None:
+        xyz = _to_map_frame(read_waypoints(waypoints_path), frame, field, sensor)
+    elif map_path is None:
+        xyz = _with_altitude(read_waypoints(DEFAULT_WAYPOINTS), sensor)
+    else:
+        xyz = _with_altitude(fitted_loop(field), sensor)
+
+    check_coverage(field, xyz)
+    poses = poses_from_waypoints(xyz)
+    bar = _progress_bar(len(poses), "casting scans") if progress else None
+    try:
+        batch = cast_scans(Surface.from_height_field(field), poses, sensor, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    empty = np.flatnonzero([len(s) == 0 for s in batch.scans])
+    if len(empty):
+        raise SlamError(
+            f"{len(empty)} of {len(poses)} scans came back empty (indices {index_ranges(empty)}): "
+            "those waypoints see no map within max_range"
+        )
+    return Dataset(
+        scans=batch.scans,
+        poses=poses,
+        waypoints=xyz,
+        map_points=batch.hits,
+        map_labels=batch.labels,
+        surface=field,
+        frame=frame,
+        sensor=sensor,
+        name=name,
+    )
+
+
+def fitted_loop(field: HeightField, spacing: float = DEFAULT_SPACING) -> np.ndarray:
+    """A loop inside a tile: the default loop's shape scaled to 55 % of the
+    tile's extent, centred on the tile."""
+    xmin, xmax, ymin, ymax = field.bounds
+    half_x, half_y = 0.55 * (xmax - xmin) / 2, 0.55 * (ymax - ymin) / 2
+    corner = 0.5 * min(half_x, half_y)
+    perimeter = 4 * (half_x + half_y) - (8 - 2 * np.pi) * corner
+    loop = loop_waypoints(half_x, half_y, corner, spacing, overlap=0.1 * perimeter)
+    return loop + np.array([(xmin + xmax) / 2, (ymin + ymax) / 2])
+
+
+def _with_altitude(points: np.ndarray, sensor: SensorConfig) -> np.ndarray:
+    return np.column_stack([points[:, :2], np.full(len(points), sensor.altitude)])
+
+
+def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, sensor: SensorConfig) -> np.ndarray:
+    """Waypoints given in the map's original coordinates move with the map;
+    waypoints that already lie in the centred map frame are taken as they
+    are (whichever reading leaves fewer of them outside the map)."""
+    xmin, xmax, ymin, ymax = field.bounds
+
+    def outside(xy):
+        return np.sum((xy[:, 0] < xmin) | (xy[:, 0] > xmax) | (xy[:, 1] < ymin) | (xy[:, 1] > ymax))
+
+    moved = frame.to_map(points)
+    xy = moved if outside(moved) <= outside(points[:, :2]) else points[:, :2]
+    if xy is not moved:
+        log.info("waypoints already lie in the centred map frame: taken as they are")
+    z = points[:, 2] * frame.scale_z if points.shape[1] == 3 else np.full(len(points), sensor.altitude)
+    return np.column_stack([xy, z])
+
+
+def _progress_bar(total: int, what: str):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=what, unit="scan", leave=False)
+
+
+def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False) -> Path:
+    """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM)
+    and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
+    written in a temporary folder beside it that replaces it at the end."""
+    import open3d as o3d
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SlamError(f"output path {out_dir} exists and is not a folder")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / "poses_gt.txt").is_file():
+        raise SlamError(f"output folder {out_dir} is not empty and holds no earlier dataset: choose another")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        (work / "scans").mkdir()
+        scans = dataset.scans
+        if progress:
+            from tqdm.auto import tqdm
+
+            scans = tqdm(scans, desc="writing scans", unit="scan", leave=False)
+        for index, scan in enumerate(scans):
+            _write_ply(work / "scans" / f"{index:06d}.ply", scan, o3d)
+        write_tum(work / "poses_gt.txt", dataset.poses)
+        _write_ply(work / "map_gt.ply", dataset.map_points, o3d)
+        (work / "sensor.toml").write_text(_sensor_toml(dataset.sensor))
+        if out_dir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old.", dir=out_dir.parent))
+            os.replace(out_dir, old / "dataset")
+            os.replace(work, out_dir)
+            shutil.rmtree(old)
+        else:
+            os.replace(work, out_dir)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    return out_dir
+
+
+def _write_ply(path: Path, points: np.ndarray, o3d) -> None:
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False, compressed=False):
+        raise SlamError(f"could not write {path}")
+
+
+def _sensor_toml(sensor: SensorConfig) -> str:
+    lines = ["# the sensor that produced this dataset", "[sensor]"]
+    for key, value in vars(sensor).items():
+        lines.append(f"{key} = {list(value) if isinstance(value, tuple) else value!r}")
+    return "\n".join(lines) + "\n"

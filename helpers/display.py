@@ -1,0 +1,14 @@
+"""The one place that decides how 3-D views are drawn.
+
+No machine of this project has a display, so VTK renders off-screen with
+OSMesa (Debian's ``libosmesa6``), chosen before VTK is first imported; that
+also keeps VTK from writing "bad X server connection" into notebook outputs.
+Set ``VTK_DEFAULT_OPENGL_WINDOW`` yourself (e.g. ``vtkEGLRenderWindow``) to
+choose another back end.
+"""
+
+import os
+
+
+def select_offscreen_backend() -> None:
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkOSOpenGLRenderWindow")

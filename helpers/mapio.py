@@ -1,0 +1,212 @@
+"""Reading an aerial map: ``.las``/``.laz``, or a ``.tar.gz`` that holds one.
+
+The map is moved into the *map frame* the whole project works in: metres,
+centred on the XY mid-point of the tile (as the reference does), heights
+kept as they are (only converted to metres). Units come from the LAS
+header's GeoTIFF keys or WKT, never assumed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import re
+import tarfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy import ndimage
+
+from . import paths
+from .errors import SlamError
+from .scene import BUILDING, GROUND, ROAD, TREE, WATER, HeightField
+
+log = logging.getLogger(__name__)
+
+# EPSG linear unit codes and their length in metres.
+LINEAR_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0, 9030: 1852.0, 9036: 1000.0}
+# ASPRS classification codes -> scene labels (unlisted codes count as ground).
+LAS_CLASSES = {2: GROUND, 3: TREE, 4: TREE, 5: TREE, 6: BUILDING, 9: WATER, 11: ROAD}
+MAX_LAZ_RATIO = 50  # a LAZ file decompresses to at most this many times its size
+
+
+@dataclass(frozen=True)
+class MapFrame:
+    """How original map coordinates become map-frame metres:
+    ``xy_m = (xy - offset) * scale_xy`` and ``z_m = z * scale_z``."""
+
+    offset: tuple[float, float]
+    scale_xy: float
+    scale_z: float
+    unit_name: str
+
+    def to_map(self, xy: np.ndarray) -> np.ndarray:
+        return (np.asarray(xy, np.float64)[:, :2] - np.asarray(self.offset)) * self.scale_xy
+
+
+IDENTITY_FRAME = MapFrame((0.0, 0.0), 1.0, 1.0, "metre")
+
+
+@dataclass(frozen=True)
+class AerialMap:
+    """A map in the map frame: its points, classes, and where they came from."""
+
+    points: np.ndarray  # (N, 3) float64, m
+    labels: np.ndarray  # (N,) uint8 scene labels
+    frame: MapFrame
+    source: str
+
+
+def read_map(path: str | Path) -> AerialMap:
+    """Read a ``.las``, ``.laz`` or ``.tar.gz`` holding one."""
+    path = Path(path)
+    if not path.is_file():
+        raise SlamError(f"map file not found: {path}")
+    name = path.name.lower()
+    if name.endswith((".tar.gz", ".tgz")):
+        return read_map(_extract_las(path))
+    if not name.endswith((".las", ".laz")):
+        raise SlamError(f"map must be a .las, .laz or .tar.gz file, got {path.name}")
+    return _read_las(path)
+
+
+def _read_las(path: Path) -> AerialMap:
+    import laspy
+
+    try:
+        with laspy.open(path) as reader:
+            header = reader.header
+            _check_header(path, header)
+            data = reader.read()
+    except SlamError:
+        raise
+    except Exception as exc:  # laspy/lazrs raise many types for corrupt files
+        raise SlamError(f"{path.name} is not a readable LAS/LAZ file ({exc})") from None
+    xy_unit, z_unit, unit_name = _units(header)
+    xyz = np.column_stack([np.asarray(data.x), np.asarray(data.y), np.asarray(data.z)])
+    finite = np.isfinite(xyz).all(axis=1)
+    xyz = xyz[finite]
+    if len(xyz) == 0:
+        raise SlamError(f"{path.name} holds no finite points")
+    lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
+    frame = MapFrame(tuple((lo + hi) / 2), xy_unit, z_unit, unit_name)
+    points = np.column_stack([frame.to_map(xyz), xyz[:, 2] * z_unit])
+    classes = np.asarray(data.classification)[finite]
+    labels = np.full(len(points), GROUND, np.uint8)
+    for code, label in LAS_CLASSES.items():
+        labels[classes == code] = label
+    log.info("read %d points from %s (units: %s)", len(points), path.name, unit_name)
+    return AerialMap(points, labels, frame, path.name)
+
+
+def _check_header(path: Path, header) -> None:
+    """Refuse headers that promise more points than the file can hold (a
+    plain read of such a file can hang instead of failing)."""
+    count, size = int(header.point_count), int(header.point_format.size)
+    file_size = path.stat().st_size
+    if count <= 0:
+        raise SlamError(f"{path.name} holds no points")
+    need = int(header.offset_to_point_data) + count * size
+    if header.are_points_compressed:
+        if count * size > MAX_LAZ_RATIO * file_size:
+            raise SlamError(f"{path.name}: header claims {count} points, far more than a {file_size}-byte LAZ holds")
+    elif need > file_size:
+        raise SlamError(f"{path.name} is truncated: header needs {need} bytes, file has {file_size}")
+
+
+def _units(header) -> tuple[float, float, str]:
+    """(horizontal metres per unit, vertical metres per unit, unit name)."""
+    horizontal = vertical = None
+    for vlr in header.vlrs:
+        for key in getattr(vlr, "geo_keys", []):
+            if key.id == 3076 and key.value_offset in LINEAR_UNITS:  # ProjLinearUnitsGeoKey
+                horizontal = LINEAR_UNITS[key.value_offset]
+            if key.id == 4099 and key.value_offset in LINEAR_UNITS:  # VerticalUnitsGeoKey
+                vertical = LINEAR_UNITS[key.value_offset]
+    if horizontal is None:
+        for vlr in list(header.vlrs) + list(header.evlrs or []):
+            wkt = getattr(vlr, "string", None)
+            if isinstance(wkt, bytes):
+                wkt = wkt.decode("ascii", "replace")
+            if wkt:
+                linear = _wkt_linear_units(wkt)
+                if linear:
+                    horizontal = linear[0]
+                    vertical = vertical or (linear[1] if len(linear) > 1 else None)
+                    break
+    if horizontal is None:
+        log.warning("no unit in the LAS header's CRS records: assuming metres")
+        horizontal = 1.0
+    vertical = vertical or horizontal
+    return horizontal, vertical, _unit_name(horizontal)
+
+
+def _wkt_linear_units(wkt: str) -> list[float]:
+    """Linear UNIT factors in order of appearance (angular units skipped)."""
+    factors = []
+    for name, factor in re.findall(r'(?:LENGTH)?UNIT\["([^"]+)"\s*,\s*([0-9.eE+-]+)', wkt):
+        if "degree" in name.lower() or "radian" in name.lower():
+            continue
+        factors.append(float(factor))
+    return factors
+
+
+def _unit_name(metres: float) -> str:
+    names = {1.0: "metre", 0.3048: "foot", 1200.0 / 3937.0: "US survey foot"}
+    return next((n for m, n in names.items() if abs(m - metres) < 1e-12), f"{metres:g} m")
+
+
+def _extract_las(archive: Path) -> Path:
+    """Extract the first .las/.laz of a tarball into the cache, once."""
+    stat = archive.stat()
+    key = hashlib.sha256(f"{archive.resolve()}|{stat.st_size}|{stat.st_mtime_ns}".encode()).hexdigest()[:16]
+    target_dir = paths.cache_dir() / "maps" / key
+    done = sorted(target_dir.glob("*.la[sz]")) if target_dir.is_dir() else []
+    if done:
+        return done[0]
+    try:
+        with tarfile.open(archive, "r:gz") as tar:
+            members = sorted(
+                (m for m in tar.getmembers() if m.isfile() and m.name.lower().endswith((".las", ".laz"))),
+                key=lambda m: m.name,
+            )
+            if not members:
+                raise SlamError(f"{archive.name} holds no .las or .laz file")
+            member = members[0]
+            source = tar.extractfile(member)
+            target_dir.mkdir(parents=True, exist_ok=True)
+            target = target_dir / Path(member.name).name
+            partial = target.with_suffix(target.suffix + ".part")
+            with open(partial, "wb") as out:
+                while chunk := source.read(1 << 20):
+                    out.write(chunk)
+            partial.replace(target)
+    except (tarfile.TarError, OSError, EOFError) as exc:
+        raise SlamError(f"{archive.name} is not a readable .tar.gz archive ({exc})") from None
+    return target
+
+
+def height_field_from_points(points: np.ndarray, labels: np.ndarray, cell: float = 1.0, max_gap: float = 3.0):
+    """A first-surface height field: the highest point of each ``cell``,
+    small holes filled from the nearest cell, cells farther than ``max_gap``
+    metres from any point left without surface."""
+    if len(points) < 3:
+        raise SlamError("the map needs at least 3 points to build a surface")
+    lo = np.floor(points[:, :2].min(axis=0) / cell) * cell
+    ij = np.floor((points[:, :2] - lo) / cell).astype(np.int64)
+    nx, ny = ij[:, 0].max() + 1, ij[:, 1].max() + 1
+    flat = ij[:, 1] * nx + ij[:, 0]
+    order = np.lexsort((points[:, 2], flat))  # by cell, then height
+    flat_sorted = flat[order]
+    top = np.r_[flat_sorted[1:] != flat_sorted[:-1], True]  # highest point per cell
+    z = np.full(ny * nx, np.nan)
+    lab = np.zeros(ny * nx, np.uint8)
+    z[flat_sorted[top]] = points[order[top], 2]
+    lab[flat_sorted[top]] = labels[order[top]]
+    z, lab = z.reshape(ny, nx), lab.reshape(ny, nx)
+    empty = np.isnan(z)
+    distance, (ii, jj) = ndimage.distance_transform_edt(empty, return_indices=True)
+    z, lab = z[ii, jj], lab[ii, jj]
+    valid = distance * cell <= max_gap
+    return HeightField(lo[0] + cell / 2, lo[1] + cell / 2, cell, z, lab, valid)

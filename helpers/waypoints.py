@@ -1,0 +1,115 @@
+"""Waypoints: the default loop, and the readers for ``.mat`` and ``.csv``.
+
+A waypoint file gives XY (and optionally Z) in the map's *original*
+coordinates and units, as the reference's ``gTruthTraj`` does; the caller
+moves them into the centred, metric map frame with the map's own offset and
+scale (see :func:`helpers.mapio.MapFrame`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SlamError
+
+DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
+
+
+def loop_waypoints(
+    half_x: float = 220.0,
+    half_y: float = 120.0,
+    corner: float = 60.0,
+    spacing: float = DEFAULT_SPACING,
+    overlap: float = 120.0,
+) -> np.ndarray:
+    """A counter-clockwise rounded-rectangle loop centred on (0, 0), (N, 2).
+
+    It starts in the middle of the bottom side heading +x, goes once round
+    and flies on ``overlap`` metres over its own start, so that the end of
+    the flight revisits the beginning (where loop closures can happen).
+    """
+    if not (0 < corner <= min(half_x, half_y)):
+        raise SlamError("the loop's corner radius must be positive and fit inside the rectangle")
+    # The outline, piece by piece, then resampled at equal arc length.
+    ax, ay = half_x - corner, half_y - corner
+    pieces = [np.array([[0.0, -half_y]])]
+    for (cx, cy), a0 in zip([(ax, -ay), (ax, ay), (-ax, ay), (-ax, -ay)], [-90, 0, 90, 180], strict=True):
+        a = np.radians(np.linspace(a0, a0 + 90, 181))
+        pieces.append(np.column_stack([cx + corner * np.cos(a), cy + corner * np.sin(a)]))
+    pieces.append(np.array([[0.0, -half_y]]))
+    outline = np.vstack(pieces)
+    seg = np.hypot(*np.diff(outline, axis=0).T)
+    s = np.r_[0.0, np.cumsum(seg)]
+    perimeter = s[-1]
+    stations = np.arange(0.0, perimeter + overlap + 1e-9, spacing)
+    wrapped = stations % perimeter
+    return np.column_stack([np.interp(wrapped, s, outline[:, 0]), np.interp(wrapped, s, outline[:, 1])])
+
+
+def read_waypoints(path: str | Path) -> np.ndarray:
+    """Read waypoints from ``.mat`` (``gTruthTraj``, N x 2 or N x 3) or
+    ``.csv`` (x,y[,z] per line, an optional header line). Returns (N, 2|3)."""
+    path = Path(path)
+    if not path.is_file():
+        raise SlamError(f"waypoints file not found: {path}")
+    suffix = path.suffix.lower()
+    if suffix == ".mat":
+        points = _read_mat(path)
+    elif suffix == ".csv":
+        points = _read_csv(path)
+    else:
+        raise SlamError(f"waypoints must be a .mat or .csv file, got {path.name}")
+    if points.ndim != 2 or points.shape[1] not in (2, 3) or len(points) == 0:
+        raise SlamError(f"{path.name}: expected an N x 2 or N x 3 array of waypoints, got shape {points.shape}")
+    if not np.isfinite(points).all():
+        raise SlamError(f"{path.name}: waypoints contain NaN or infinite values")
+    return points
+
+
+def write_waypoints(path: str | Path, xy: np.ndarray) -> None:
+    """Write waypoints as ``.csv`` (header ``x,y``) or ``.mat`` (``gTruthTraj``)."""
+    path = Path(path)
+    if path.suffix.lower() == ".mat":
+        from scipy.io import savemat
+
+        savemat(path, {"gTruthTraj": np.asarray(xy, np.float64)}, do_compression=True)
+    else:
+        np.savetxt(path, xy, fmt="%.4f", delimiter=",", header="x,y", comments="")
+
+
+def _read_mat(path: Path) -> np.ndarray:
+    from scipy.io import loadmat
+
+    try:
+        data = loadmat(path)
+    except NotImplementedError:  # MATLAB v7.3 files are HDF5
+        raise SlamError(f"{path.name}: MATLAB v7.3 (HDF5) files are not supported; save with -v7") from None
+    except Exception as exc:  # scipy raises several types for corrupt files
+        raise SlamError(f"{path.name} is not a readable MAT-file ({exc})") from None
+    if "gTruthTraj" not in data:
+        names = sorted(k for k in data if not k.startswith("__"))
+        raise SlamError(f"{path.name} has no variable gTruthTraj (it holds {names})")
+    return np.asarray(data["gTruthTraj"], dtype=np.float64)
+
+
+def _read_csv(path: Path) -> np.ndarray:
+    lines = [line.strip() for line in path.read_text(errors="replace").splitlines() if line.strip()]
+    if lines and not _is_number(lines[0].split(",")[0]):
+        lines = lines[1:]  # a header such as "x,y,z"
+    try:
+        rows = [[float(v) for v in line.split(",")] for line in lines]
+    except ValueError:
+        raise SlamError(f"{path.name}: every line must be x,y or x,y,z numbers") from None
+    if len({len(r) for r in rows}) > 1:
+        raise SlamError(f"{path.name}: lines have different numbers of columns")
+    return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
