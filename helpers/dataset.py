@@ -17,6 +17,7 @@ from . import paths
 from .config import SensorConfig
 from .errors import SlamError
 from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
+from .plyio import write_ply
 from .scene import HeightField, default_scene
 from .sensor import Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
 from .trajectory import write_tum
@@ -49,6 +50,14 @@ class Dataset:
         """Scan ``index`` moved into the map frame by its ground-truth pose."""
         pose = self.poses[index]
         return self.scans[index] @ pose[:3, :3].T + pose[:3, 3]
+
+    def surface_distances(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m) from map-frame points to the surface the rays hit."""
+        import open3d as o3d
+
+        scene = Surface.from_height_field(self.surface).raycasting_scene()
+        query = o3d.core.Tensor(np.asarray(points, np.float32))
+        return scene.compute_distance(query).numpy().astype(np.float64)
 
 
 @lru_cache(maxsize=2)
@@ -148,8 +157,6 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
     """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM)
     and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
     written in a temporary folder beside it that replaces it at the end."""
-    import open3d as o3d
-
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise SlamError(f"output path {out_dir} exists and is not a folder")
@@ -165,9 +172,9 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
 
             scans = tqdm(scans, desc="writing scans", unit="scan", leave=False)
         for index, scan in enumerate(scans):
-            _write_ply(work / "scans" / f"{index:06d}.ply", scan, o3d)
+            write_ply(work / "scans" / f"{index:06d}.ply", scan)
         write_tum(work / "poses_gt.txt", dataset.poses)
-        _write_ply(work / "map_gt.ply", dataset.map_points, o3d)
+        write_ply(work / "map_gt.ply", dataset.map_points)
         (work / "sensor.toml").write_text(_sensor_toml(dataset.sensor))
         if out_dir.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old.", dir=out_dir.parent))
@@ -180,12 +187,6 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
         shutil.rmtree(work, ignore_errors=True)
         raise
     return out_dir
-
-
-def _write_ply(path: Path, points: np.ndarray, o3d) -> None:
-    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
-    if not o3d.io.write_point_cloud(str(path), cloud, write_ascii=False, compressed=False):
-        raise SlamError(f"could not write {path}")
 
 
 def _sensor_toml(sensor: SensorConfig) -> str:

@@ -4,7 +4,8 @@ No machine of this project has a display, so VTK renders off-screen with
 OSMesa (Debian's ``libosmesa6``), chosen before VTK is first imported; that
 also keeps VTK from writing "bad X server connection" into notebook outputs.
 Set ``VTK_DEFAULT_OPENGL_WINDOW`` yourself (e.g. ``vtkEGLRenderWindow``) to
-choose another back end.
+choose another back end. Open3D's web visualiser (which needs a browser
+connection and prints a banner in every notebook) is switched off too.
 """
 
 import os
@@ -12,3 +13,4 @@ import os
 
 def select_offscreen_backend() -> None:
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkOSOpenGLRenderWindow")
+    os.environ.setdefault("OPEN3D_DISABLE_WEB_VISUALIZER", "true")

@@ -1,0 +1,237 @@
+"""Pictures for the notebooks: point clouds with PyVista (off-screen, fixed
+camera) and trajectories with matplotlib, in the same colours everywhere.
+
+Every function returns something a notebook displays as a still image (PNG
+bytes inside ``IPython.display.Image``) or an HTML animation, so the pictures
+survive a static HTML export and need no running kernel.
+"""
+
+from __future__ import annotations
+
+import io
+
+import matplotlib
+
+matplotlib.use("Agg")  # no display anywhere; notebooks still show figures inline
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from .scene import CLASS_NAMES
+
+# One colour per thing, in all seven notebooks.
+COLORS = {
+    "ground_truth": "#2ca02c",  # green
+    "odometry": "#d62728",  # red
+    "optimized": "#1f77b4",  # blue
+    "loop": "#ff7f0e",  # orange
+    "waypoints": "#e41a1c",
+    "moving": "#e377c2",  # the scan being registered
+    "fixed": "#17becf",  # the scan it is registered to
+}
+CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
+HEIGHT_CMAP = "gist_earth"
+WINDOW = (900, 600)
+
+
+def _plotter(window=WINDOW):
+    import pyvista as pv
+
+    plotter = pv.Plotter(off_screen=True, window_size=list(window))
+    plotter.set_background("white")
+    return plotter
+
+
+def encode(image: np.ndarray, fmt: str = "jpeg") -> bytes:
+    """An RGB array as JPEG (the default: small, fine for maps and clouds) or PNG bytes."""
+    from PIL import Image
+
+    buffer = io.BytesIO()
+    if fmt == "jpeg":
+        Image.fromarray(image).save(buffer, format="JPEG", quality=88)
+    else:
+        Image.fromarray(image).save(buffer, format="PNG", optimize=True)
+    return buffer.getvalue()
+
+
+def show(image: np.ndarray, fmt: str = "jpeg"):
+    """Display an RGB array in a notebook as a still image."""
+    from IPython.display import Image
+
+    return Image(data=encode(image, fmt), format=fmt)
+
+
+def figure_image(fig, dpi: int = 80) -> np.ndarray:
+    """Draw a matplotlib figure into an RGB array (and close it)."""
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    from PIL import Image
+
+    buffer.seek(0)
+    return np.asarray(Image.open(buffer).convert("RGB"))
+
+
+def show_figure(fig, fmt: str = "png", dpi: int = 80):
+    """Display a matplotlib figure as a still image (and close it). PNG keeps
+    lines and text sharp; pass ``fmt="jpeg"`` for figures full of raster."""
+    return show(figure_image(fig, dpi), fmt)
+
+
+def cloud_view(
+    points: np.ndarray,
+    scalars: np.ndarray | None = None,
+    cmap: str = HEIGHT_CMAP,
+    clim=None,
+    point_size: float = 2.0,
+    path: np.ndarray | None = None,
+    path_color: str = COLORS["waypoints"],
+    path_height: float | None = None,
+    title: str | None = None,
+    elevation: float = 55.0,
+    azimuth: float = -60.0,
+    zoom: float = 1.3,
+    scalar_title: str = "height (m)",
+    window=WINDOW,
+    extra=(),
+) -> np.ndarray:
+    """Render points (coloured by ``scalars``, by default their height) and an
+    optional path as an off-screen 3-D view; returns an RGB array.
+
+    ``extra`` is a sequence of ``(points, color)`` drawn as flat-coloured
+    clouds. ``path_height`` draws the path at that height instead of its own
+    (a drone at 700 m would sit far above a map at 100 m).
+    """
+    import pyvista as pv
+
+    plotter = _plotter(window)
+    cloud = pv.PolyData(np.asarray(points, np.float32))
+    cloud["value"] = points[:, 2] if scalars is None else scalars
+    plotter.add_mesh(
+        cloud,
+        scalars="value",
+        cmap=cmap,
+        clim=clim,
+        point_size=point_size,
+        render_points_as_spheres=False,
+        scalar_bar_args={"title": scalar_title, "color": "black", "vertical": True},
+    )
+    for extra_points, color in extra:
+        plotter.add_mesh(pv.PolyData(np.asarray(extra_points, np.float32)), color=color, point_size=point_size)
+    if path is not None and len(path) > 1:
+        path = np.array(path, np.float64)
+        if path_height is not None:
+            path[:, 2] = path_height
+        plotter.add_mesh(pv.lines_from_points(np.asarray(path, np.float32)), color=path_color, line_width=3)
+        plotter.add_mesh(pv.PolyData(np.asarray(path[:1], np.float32)), color=path_color, point_size=12)
+    if title:
+        plotter.add_text(title, font_size=11, color="black")
+    _place_camera(plotter, points, elevation, azimuth, zoom)
+    image = plotter.screenshot(return_img=True)
+    plotter.close()
+    return image
+
+
+def _place_camera(plotter, points, elevation, azimuth, zoom):
+    """Look at the cloud's centre from ``elevation`` degrees above the horizon
+    and ``azimuth`` degrees from the +x axis, z up."""
+    lo, hi = points.min(axis=0), points.max(axis=0)
+    focal = (lo + hi) / 2
+    distance = 1.9 * np.linalg.norm(hi - lo) / zoom
+    el, az = np.radians(elevation), np.radians(azimuth)
+    direction = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    plotter.camera_position = [tuple(focal + distance * direction), tuple(focal), (0.0, 0.0, 1.0)]
+
+
+def thin(points: np.ndarray, every: int, *arrays):
+    """Every ``every``-th point (and the same rows of ``arrays``): a fixed,
+    seedless thinning for drawing large clouds quickly."""
+    keep = slice(None, None, max(1, every))
+    return (points[keep], *(a[keep] for a in arrays)) if arrays else points[keep]
+
+
+def height_field_figure(field, waypoints: np.ndarray | None = None):
+    """Two maps of the scene seen from above: heights and classes."""
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    xmin, xmax, ymin, ymax = field.bounds
+    extent = (xmin, xmax, ymin, ymax)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 4.6), constrained_layout=True)
+    shown = np.where(field.valid, field.z, np.nan)
+    im = left.imshow(shown, origin="lower", extent=extent, cmap=HEIGHT_CMAP)
+    fig.colorbar(im, ax=left, label="height (m)", shrink=0.85)
+    right.imshow(field.labels, origin="lower", extent=extent, cmap=ListedColormap(CLASS_COLORS), vmin=0, vmax=4)
+    right.legend(
+        handles=[Patch(color=c, label=n) for c, n in zip(CLASS_COLORS, CLASS_NAMES, strict=True)],
+        loc="upper right",
+        fontsize=8,
+    )
+    for ax, title in ((left, "surface height"), (right, "what covers the ground")):
+        ax.set(title=title, xlabel="x (m)", ylabel="y (m)")
+        if waypoints is not None:
+            ax.plot(waypoints[:, 0], waypoints[:, 1], color=COLORS["waypoints"], lw=1.5, label="flight")
+            ax.plot(*waypoints[0, :2], "o", color=COLORS["waypoints"])
+    return fig
+
+
+def top_down(points: np.ndarray, half_width: float, half_length: float, cell: float = 1.0) -> np.ndarray:
+    """Rasterise sensor-frame points seen from above: the highest z per cell,
+    gaps narrower than 3 m (between rays 2 m apart along the track) filled
+    from the nearest cell, NaN farther out. Rows run along x (forward),
+    columns along y (draw it with an inverted x axis to put the drone's
+    left, +y, on the left as seen from above)."""
+    from scipy import ndimage
+
+    rows, cols = int(2 * half_length / cell), int(2 * half_width / cell)
+    i = np.floor((points[:, 0] + half_length) / cell).astype(int)
+    j = np.floor((points[:, 1] + half_width) / cell).astype(int)
+    inside = (i >= 0) & (i < rows) & (j >= 0) & (j < cols)
+    image = np.full(rows * cols, -np.inf)
+    np.maximum.at(image, i[inside] * cols + j[inside], points[inside, 2])
+    image = image.reshape(rows, cols)
+    empty = np.isinf(image)
+    distance, (ni, nj) = ndimage.distance_transform_edt(empty, return_indices=True)
+    image = image[ni, nj]
+    image[distance * cell > 1.5] = np.nan
+    return image
+
+
+def scan_player(scans: list[np.ndarray], indices, interval_ms: int = 200, size=(7.5, 2.6)):
+    """An HTML animation (play, pause, step) of scans seen from above in the
+    sensor frame, coloured by height: the notebook's "pcplayer". The frames
+    are embedded, so it plays in a static HTML export too."""
+    from matplotlib import animation
+
+    indices = list(indices)
+    every = np.concatenate([scans[i] for i in indices])
+    lo, hi = np.percentile(every[:, 2], [0.5, 99.5])
+    half_w = np.ceil(np.abs(every[:, 1]).max())
+    half_l = np.ceil(np.abs(every[:, 0]).max())
+    extent = (-half_w, half_w, -half_l, half_l)
+    fig, ax = plt.subplots(figsize=size)
+    fig.subplots_adjust(left=0.08, right=0.98, bottom=0.2, top=0.88)  # fixed: a layout engine per frame is slow
+    image = ax.imshow(
+        top_down(scans[indices[0]], half_w, half_l),
+        origin="lower",
+        extent=extent,
+        cmap=HEIGHT_CMAP,
+        vmin=lo,
+        vmax=hi,
+        interpolation="nearest",
+    )
+    fig.colorbar(image, ax=ax, label="z, sensor frame (m)", pad=0.01)
+    ax.set(xlabel="y, to the left of the drone (m)", ylabel="x, forward (m)")
+    ax.invert_xaxis()  # seen from above with x up, +y is on the left
+    label = ax.set_title("")
+
+    def draw(frame):
+        image.set_data(top_down(scans[indices[frame]], half_w, half_l))
+        label.set_text(f"scan {indices[frame]} seen from the drone")
+        return image, label
+
+    anim = animation.FuncAnimation(fig, draw, frames=len(indices), interval=interval_ms, blit=False)
+    with matplotlib.rc_context({"animation.frame_format": "jpeg", "savefig.dpi": 72}):
+        html = anim.to_jshtml(default_mode="loop")
+    plt.close(fig)
+    return html

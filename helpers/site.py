@@ -1,0 +1,93 @@
+"""The static site: the notebooks executed in order and exported to HTML,
+with an index page linking them. Images and animations are embedded in each
+page, so the site opens from disk with no server and no network."""
+
+from __future__ import annotations
+
+import html
+import logging
+import shutil
+import tempfile
+from pathlib import Path
+
+from . import paths
+from .errors import SlamError
+
+log = logging.getLogger(__name__)
+NOTEBOOKS = paths.REPO / "notebooks"
+TIMEOUT_S = 1800  # per notebook
+
+
+def notebook_paths() -> list[Path]:
+    found = sorted(NOTEBOOKS.glob("[0-9][0-9]_*.ipynb"))
+    if not found:
+        raise SlamError(f"no notebooks found in {NOTEBOOKS}")
+    return found
+
+
+def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
+    """Execute (optionally) and export every notebook; returns index.html."""
+    import nbformat
+    from nbclient import NotebookClient
+    from nbconvert import HTMLExporter
+
+    out_dir = Path(out_dir)
+    work = Path(tempfile.mkdtemp(prefix=".site.", dir=_parent(out_dir)))
+    exporter = HTMLExporter(template_name="lab")
+    pages = []
+    try:
+        for path in notebook_paths():
+            notebook = nbformat.read(path, as_version=4)
+            if execute:
+                log.info("executing %s", path.name)
+                NotebookClient(notebook, timeout=TIMEOUT_S, resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+            body, _ = exporter.from_notebook_node(notebook)
+            page = path.with_suffix(".html").name
+            (work / page).write_text(body, encoding="utf-8")
+            pages.append((page, _title(notebook, path)))
+        (work / "index.html").write_text(_index(pages), encoding="utf-8")
+        if out_dir.exists():
+            shutil.rmtree(out_dir)
+        work.replace(out_dir)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise
+    return out_dir / "index.html"
+
+
+def _parent(out_dir: Path) -> Path:
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    return out_dir.parent
+
+
+def _title(notebook, path: Path) -> str:
+    for cell in notebook.cells:
+        if cell.cell_type == "markdown":
+            for line in cell.source.splitlines():
+                if line.startswith("# "):
+                    return line[2:].strip()
+    return path.stem
+
+
+def _index(pages) -> str:
+    items = "\n".join(f'    <li><a href="{html.escape(page)}">{html.escape(title)}</a></li>' for page, title in pages)
+    return f"""<!DOCTYPE html>
+<html lang="en">
+<head>
+  <meta charset="utf-8">
+  <title>Aerial lidar SLAM, step by step</title>
+  <style>
+    body {{ font-family: system-ui, sans-serif; max-width: 44rem; margin: 3rem auto; line-height: 1.5; }}
+    li {{ margin: 0.4rem 0; }}
+  </style>
+</head>
+<body>
+  <h1>Aerial lidar SLAM, step by step</h1>
+  <p>A drone flies over an aerial map and scans it with a lidar. These pages rebuild the
+  whole SLAM pipeline, one stage a page, from the simulated scans to the corrected map.</p>
+  <ol>
+{items}
+  </ol>
+</body>
+</html>
+"""
