@@ -90,7 +90,7 @@ def _read_las(path: Path) -> AerialMap:
     if len(xyz) == 0:
         raise SlamError(f"{path.name} holds no finite points")
     lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
-    frame = MapFrame(tuple((lo + hi) / 2), xy_unit, z_unit, unit_name)
+    frame = MapFrame(tuple(float(v) for v in (lo + hi) / 2), xy_unit, z_unit, unit_name)
     points = np.column_stack([frame.to_map(xyz), xyz[:, 2] * z_unit])
     classes = np.asarray(data.classification)[finite]
     labels = np.full(len(points), GROUND, np.uint8)

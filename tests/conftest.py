@@ -1,0 +1,38 @@
+"""Shared fixtures: the default dataset (built once per test session) and
+the real aerial tile kept beside the repository."""
+
+import numpy as np
+import pytest
+
+import helpers
+from helpers import paths
+
+AUTZEN = paths.shared_data("autzen_trim.laz")
+
+
+@pytest.fixture(scope="session")
+def default_dataset():
+    """The embedded scene flown along the shipped loop (689 scans, ~4 s)."""
+    return helpers.create_dataset()
+
+
+@pytest.fixture()
+def autzen():
+    if not AUTZEN.is_file():
+        pytest.skip(f"real tile not found at {AUTZEN} (it sits beside the repository in CI)")
+    return AUTZEN
+
+
+@pytest.fixture()
+def short_flight(tmp_path):
+    """A 40-waypoint straight flight over the default scene, as a CSV file."""
+    xy = np.column_stack([np.arange(-40.0, 40.0, 2.0), np.full(40, 10.0)])
+    path = tmp_path / "short.csv"
+    np.savetxt(path, xy, delimiter=",", header="x,y", comments="")
+    return path
+
+
+@pytest.fixture(autouse=True)
+def private_cache(tmp_path, monkeypatch):
+    """Every test unpacks archives into its own cache folder."""
+    monkeypatch.setenv("HELPERS_CACHE", str(tmp_path / "cache"))
