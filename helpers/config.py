@@ -23,17 +23,22 @@ from pathlib import Path
 from .errors import SlamError
 
 
+def _param(default, help: str):
+    """A parameter with its one-line meaning (shown by :func:`describe`)."""
+    return field(default=default, metadata={"help": help})
+
+
 @dataclass(frozen=True)
 class SensorConfig:
     """The simulated lidar and how it flies."""
 
-    altitude: float = 700.0  # m, constant flight height (z in the map frame)
-    azimuth: tuple[float, float, float] = (-13.0, 13.0, 0.08)  # deg, across track
-    elevation: tuple[float, float, float] = (-2.5, 2.5, 0.2)  # deg, along track
-    max_range: float = 800.0  # m, returns farther than this are lost
-    range_noise: float = 0.02  # m, standard deviation of the range error
-    dropout: float = 0.01  # probability that a ray gives no return
-    seed: int = 0  # seed of the range noise and dropouts
+    altitude: float = _param(700.0, "flight height in metres (z in the map frame), constant")
+    azimuth: tuple[float, float, float] = _param((-13.0, 13.0, 0.08), "ray angles across track [start, stop, step] deg")
+    elevation: tuple[float, float, float] = _param((-2.5, 2.5, 0.2), "ray angles along track [start, stop, step], deg")
+    max_range: float = _param(800.0, "returns farther than this many metres are lost")
+    range_noise: float = _param(0.02, "standard deviation of the range error, metres")
+    dropout: float = _param(0.01, "probability that a ray gives no return")
+    seed: int = _param(0, "seed of the range noise and dropouts")
 
     def __post_init__(self):
         for name in ("azimuth", "elevation"):
@@ -59,23 +64,23 @@ class SlamConfig:
     """The SLAM pipeline (the reference's parameter block, in snake_case)."""
 
     # Registration (stage 3)
-    skip_frames: int = 3  # register every 3rd scan: the "accepted" scans
-    grid_step: float = 1.5  # m, grid-average downsampling cell before features
-    neighbors: int = 60  # nearest neighbours for normals and FPFH
-    match_threshold: float = 0.1  # largest normalised descriptor distance of a match
-    match_ratio: float = 0.97  # ratio test: best / second-best distance must be below it
-    max_distance: float = 1.0  # m, inlier distance of the robust rigid fit (MSAC)
-    max_num_trials: int = 3000  # hypotheses drawn by the robust fit
-    metric: str = "plane-to-plane"  # ICP metric: point-to-point, point-to-plane, plane-to-plane
-    inlier_distance: float = 3.0  # m, ICP ignores correspondences farther than this
-    seed: int = 0  # seed of the robust fit's sampling
+    skip_frames: int = _param(3, "register every n-th scan only: the accepted scans")
+    grid_step: float = _param(1.5, "cell of the grid-average downsampling before features, metres")
+    neighbors: int = _param(60, "nearest neighbours for normals and FPFH")
+    match_threshold: float = _param(0.1, "largest normalised descriptor distance of a match")
+    match_ratio: float = _param(0.97, "ratio test: best / second-best distance must be below it")
+    max_distance: float = _param(1.0, "inlier distance of the robust rigid fit (MSAC), metres")
+    max_num_trials: int = _param(3000, "hypotheses drawn by the robust fit")
+    metric: str = _param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane")
+    inlier_distance: float = _param(3.0, "ICP ignores correspondences farther apart than this, metres")
+    seed: int = _param(0, "seed of the robust fit's sampling")
     # Mapping and loop closure (stages 4-5)
-    align_grid_step: float = 1.2  # m, grid of the merge that builds submaps and the map
-    loop_closure_search_radius: float = 7.9  # m, submaps whose centre is nearer are candidates
-    n_scans_per_submap: int = 3  # accepted scans per submap
-    sub_map_thresh: int = 15  # the most recent submaps are never loop candidates
-    loop_closure_threshold: float = 0.6  # ICP RMSE below which a submap matches
-    rmse_threshold: float = 0.6  # ICP RMSE below which the best scan match becomes a loop edge
+    align_grid_step: float = _param(1.2, "grid of the merge that builds submaps and the map, metres")
+    loop_closure_search_radius: float = _param(7.9, "submaps whose centre is nearer than this (metres) are candidates")
+    n_scans_per_submap: int = _param(3, "accepted scans per submap")
+    sub_map_thresh: int = _param(15, "the most recent submaps are never loop candidates")
+    loop_closure_threshold: float = _param(0.6, "ICP RMSE below which a submap matches")
+    rmse_threshold: float = _param(0.6, "ICP RMSE below which the best scan match becomes a loop edge")
 
     def __post_init__(self):
         positive = ("grid_step", "max_distance", "inlier_distance", "align_grid_step")
@@ -98,6 +103,11 @@ class Config:
 
     sensor: SensorConfig = field(default_factory=SensorConfig)
     slam: SlamConfig = field(default_factory=SlamConfig)
+
+
+def describe(table) -> list[tuple[str, object, str]]:
+    """(name, value, meaning) for every parameter of a config table."""
+    return [(f.name, getattr(table, f.name), f.metadata.get("help", "")) for f in dataclasses.fields(table)]
 
 
 def load_config(path: str | Path | None = None) -> Config:
