@@ -14,3 +14,6 @@ import os
 def select_offscreen_backend() -> None:
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkOSOpenGLRenderWindow")
     os.environ.setdefault("OPEN3D_DISABLE_WEB_VISUALIZER", "true")
+    # Open3D's OpenMP threads otherwise spin after each call and starve
+    # numpy's (measured: 1.2 s instead of 0.35 s per registered scan).
+    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")

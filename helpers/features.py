@@ -1,0 +1,174 @@
+"""Stage 3a: downsampling, FPFH descriptors and descriptor matching (the
+reference's ``pcdownsample``, ``extractFPFHFeatures`` and ``pcmatchfeatures``).
+
+Descriptor normalisation, used everywhere in this package: Open3D's FPFH is
+three 11-bin histograms (angles alpha, phi, theta) that each sum to 200.
+:func:`fpfh` divides each histogram by its own sum, so that every bin is a
+fraction, then scales the whole 33-vector to unit Euclidean length. The
+*normalised distance* between two descriptors ``a`` and ``b`` is then
+``|a - b| / sqrt(2)``: 0 for identical descriptors and at most 1 (two unit
+vectors with no negative entries are at most ``sqrt(2)`` apart), which is the
+scale ``match_threshold`` is expressed in.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+from .errors import SlamError
+
+HISTOGRAMS = 3  # FPFH is three histograms ...
+BINS = 11  # ... of 11 bins each
+UP = np.array([0.0, 0.0, 1.0])  # normals are turned towards the sensor, which looks down from +z
+MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache)
+MAX_DESCRIPTOR_DISTANCE = np.sqrt(2.0)  # largest distance between unit descriptors with no negative entry
+
+
+def check_points(points, what: str = "point cloud", minimum: int = 1) -> np.ndarray:
+    """``points`` as a float64 (N, 3) array, or a SlamError saying what is wrong."""
+    array = np.asarray(points, dtype=np.float64)
+    if array.ndim != 2 or array.shape[1] != 3:
+        raise SlamError(f"{what} must be an N x 3 array of points, got shape {array.shape}")
+    if len(array) < minimum:
+        raise SlamError(f"{what} has {len(array)} points, at least {minimum} are needed")
+    if not np.isfinite(array).all():
+        raise SlamError(f"{what} contains NaN or infinite coordinates")
+    return array
+
+
+def grid_average(points, step: float) -> np.ndarray:
+    """Replace the points of every cubic cell of side ``step`` (m) by their mean.
+
+    Cells are those of a grid anchored at the origin; the result has one point
+    per occupied cell, ordered by cell index (x, then y, then z), so the same
+    input always gives the same output in the same order.
+    """
+    points = check_points(points, "the cloud to downsample")
+    if not (np.isfinite(step) and step > 0):
+        raise SlamError(f"the grid step must be a positive number of metres, got {step!r}")
+    cells = np.floor(points / step).astype(np.int64)
+    cells -= cells.min(axis=0)
+    extent = cells.max(axis=0) + 1
+    key = (cells[:, 0] * extent[1] + cells[:, 1]) * extent[2] + cells[:, 2]
+    _, inverse, counts = np.unique(key, return_inverse=True, return_counts=True)
+    sums = np.column_stack([np.bincount(inverse, weights=points[:, i]) for i in range(3)])
+    return sums / counts[:, None]
+
+
+def to_cloud(points: np.ndarray, normals_knn: int | None = None) -> o3d.geometry.PointCloud:
+    """An Open3D cloud of ``points``; with ``normals_knn``, with normals from
+    that many neighbours, turned towards +z (the sensor is above the ground)."""
+    cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(points))
+    if normals_knn is not None:
+        cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(normals_knn))
+        cloud.orient_normals_to_align_with_direction(UP)
+    return cloud
+
+
+def fpfh(points, neighbors: int) -> np.ndarray:
+    """FPFH descriptors, (M, 33), one per point, normalised as the module says.
+
+    Normals come from the ``neighbors`` nearest points and point up (+z); the
+    histograms use the same ``neighbors`` nearest points.
+    """
+    points = check_points(points, "the cloud to describe")
+    if neighbors < 3:
+        raise SlamError(f"FPFH needs at least 3 neighbours, got {neighbors}")
+    if len(points) <= neighbors:
+        raise SlamError(
+            f"FPFH with {neighbors} neighbours needs more than {neighbors} points, the cloud has {len(points)}"
+        )
+    cloud = to_cloud(points, normals_knn=neighbors)
+    raw = o3d.pipelines.registration.compute_fpfh_feature(cloud, o3d.geometry.KDTreeSearchParamKNN(neighbors))
+    return normalise_descriptors(np.asarray(raw.data).T)
+
+
+def normalise_descriptors(raw: np.ndarray) -> np.ndarray:
+    """Each 11-bin histogram divided by its sum, then each 33-vector scaled to unit length."""
+    hist = np.asarray(raw, dtype=np.float64).reshape(len(raw), HISTOGRAMS, BINS)
+    sums = hist.sum(axis=2, keepdims=True)
+    hist = np.divide(hist, sums, out=np.zeros_like(hist), where=sums > 0)
+    flat = hist.reshape(len(raw), HISTOGRAMS * BINS)
+    norms = np.linalg.norm(flat, axis=1, keepdims=True)
+    return np.divide(flat, norms, out=np.zeros_like(flat), where=norms > 0)
+
+
+def match_features(f_moving, f_fixed, threshold: float, ratio: float) -> np.ndarray:
+    """Pairs ``(i_moving, j_fixed)``, (K, 2) int64, of descriptors that match.
+
+    For every moving descriptor the two nearest fixed descriptors are found
+    (exhaustive search). A pair is kept when all three
+    hold:
+
+    - ``threshold``: the normalised distance to the nearest fixed descriptor,
+      ``|a - b| / sqrt(2)`` (0 = identical, 1 = as far apart as unit
+      descriptors can be), is at most ``threshold``;
+    - ``ratio``: that distance divided by the distance to the second-nearest
+      fixed descriptor is strictly below ``ratio`` (an ambiguous match, whose
+      runner-up is nearly as close, is dropped; two equal distances never pass);
+    - uniqueness: the moving descriptor is also the nearest moving descriptor
+      of its fixed partner, so no fixed point is used twice.
+
+    Pairs are sorted by moving index.
+    """
+    f_moving = _check_descriptors(f_moving, "moving")
+    f_fixed = _check_descriptors(f_fixed, "fixed")
+    if f_moving.shape[1] != f_fixed.shape[1]:
+        raise SlamError(f"descriptors differ in length: {f_moving.shape[1]} and {f_fixed.shape[1]}")
+    if not (0 < threshold <= 1) or not (0 < ratio <= 1):
+        raise SlamError(f"match threshold and ratio must lie in (0, 1], got {threshold} and {ratio}")
+    if len(f_fixed) < 2:
+        raise SlamError("the ratio test needs at least 2 fixed descriptors")
+    nearest, second = _two_nearest(f_moving, f_fixed)
+    best_d = _distance(f_moving, f_fixed[nearest])
+    second_d = _distance(f_moving, f_fixed[second])
+    keep = (best_d <= threshold) & (best_d < ratio * second_d)
+    moving = np.flatnonzero(keep)
+    partners = nearest[moving]
+    back, _ = _two_nearest(f_fixed[partners], f_moving)
+    moving = moving[back == moving]
+    return np.column_stack([moving, nearest[moving]]).astype(np.int64)
+
+
+def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise normalised distance ``|a - b| / sqrt(2)``, in float64."""
+    return np.linalg.norm(a - b, axis=1) / MAX_DESCRIPTOR_DISTANCE
+
+
+def _two_nearest(queries: np.ndarray, references: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the nearest and second-nearest reference of every query.
+
+    Exhaustive search: for unit descriptors the squared distance is
+    ``|q|^2 + |r|^2 - 2 q.r``, so a float32 matrix product, a block of rows at
+    a time, ranks all pairs (ties go to the lower index). With one reference
+    the second-nearest is the nearest.
+    """
+    q = queries.astype(np.float32)
+    r_t = np.ascontiguousarray(references.T, dtype=np.float32)
+    r_sq = np.einsum("ji,ji->i", r_t, r_t)
+    first = np.empty(len(q), dtype=np.int64)
+    second = np.empty(len(q), dtype=np.int64)
+    buffer = np.empty((MATCH_BLOCK_ROWS, len(r_sq)), dtype=np.float32)  # reused: fresh pages are slow
+    for start in range(0, len(q), MATCH_BLOCK_ROWS):
+        rows = q[start : start + MATCH_BLOCK_ROWS]
+        block = buffer[: len(rows)]
+        np.matmul(rows, r_t, out=block)
+        block *= -2.0
+        block += r_sq  # squared distance minus |q|^2, which does not change the ranking
+        j = block.argmin(axis=1)
+        first[start : start + len(rows)] = j
+        if len(r_sq) > 1:
+            block[np.arange(len(rows)), j] = np.inf
+            j = block.argmin(axis=1)
+        second[start : start + len(rows)] = j
+    return first, second
+
+
+def _check_descriptors(features, which: str) -> np.ndarray:
+    array = np.asarray(features, dtype=np.float64)
+    if array.ndim != 2 or len(array) == 0:
+        raise SlamError(f"the {which} descriptors must be a non-empty M x D array, got shape {array.shape}")
+    if not np.isfinite(array).all():
+        raise SlamError(f"the {which} descriptors contain NaN or infinite values")
+    return array

@@ -1,0 +1,196 @@
+"""Loop closure (stage 5): find old submaps near the current scan, verify them
+by ICP, then turn the best scan-to-scan match into a loop edge.
+
+Frames and conventions are those of :mod:`helpers.posegraph`: a scan is an
+(N, 3) array in its own frame, its pose carries it into the map frame, and a
+loop edge ``(i, j, T_ij)`` says ``pose_j = pose_i @ T_ij``. Submaps and their
+centres are in the map frame (:mod:`helpers.submaps`).
+
+ICP is injected as ``icp_fn(moving, fixed, init) -> (T, rmse)``, where ``T``
+carries ``moving`` onto ``fixed`` starting from ``init``; :func:`icp_with`
+builds one from :func:`helpers.registration.refine_icp`, and tests pass a
+stub.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import numpy as np
+
+from .errors import SlamError
+from .features import check_points
+from .posegraph import check_pose
+from .submaps import scan_ids_of
+
+log = logging.getLogger(__name__)
+
+LOOP_ICP_ITERATIONS = 50  # the reference's ICP iterations when checking a submap
+MAX_ATTEMPTS = 3  # submaps registered at most, nearest first
+MAX_RETURNED = 3  # matching submaps returned at most, best first
+# Odometry drift grows with the distance flown, so an old place can look
+# farther away than it is. The search radius grows by this fraction of the
+# distance flown since the submap (2 % is a common lidar-odometry drift rate);
+# 0 keeps the reference's fixed radius.
+RADIUS_GROWTH = 0.02
+
+IcpFn = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
+
+
+class LoopCandidates(NamedTuple):
+    """Matching submaps, best (lowest RMSE) first.
+
+    ``poses[k]`` is the scan's pose in the map frame that ICP found against
+    submap ``ids[k]``; it seeds the scan-to-scan registration.
+    """
+
+    ids: np.ndarray  # (L,) submap ids
+    scores: np.ndarray  # (L,) ICP RMSE, m
+    poses: np.ndarray  # (L, 4, 4)
+
+
+@dataclass(frozen=True)
+class LoopMatch:
+    """A verified loop: ``pose_j = pose_i @ relative_pose``, ready for :meth:`PoseGraph.add_loop`."""
+
+    i: int  # the older scan that matched
+    j: int  # the current scan
+    relative_pose: np.ndarray
+    rmse: float
+
+
+def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP_ITERATIONS) -> IcpFn:
+    """An ``icp_fn`` that calls :func:`helpers.registration.refine_icp` with these settings."""
+    from .registration import refine_icp
+
+    return functools.partial(refine_icp, metric=metric, inlier_distance=inlier_distance, max_iterations=max_iterations)
+
+
+def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """For every submap, the path length from its centre through the later centres to ``position``."""
+    steps = np.linalg.norm(np.diff(submap_centres, axis=0), axis=1)
+    to_end = np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
+    return to_end + np.linalg.norm(position - submap_centres[-1])
+
+
+def find_loop_candidates(
+    submaps: Sequence[np.ndarray],
+    submap_centres: np.ndarray,
+    scan_points: np.ndarray,
+    scan_pose: np.ndarray,
+    current_submap_id: int,
+    sub_map_thresh: int,
+    search_radius: float,
+    loop_closure_threshold: float,
+    icp_fn: IcpFn,
+    max_attempts: int = MAX_ATTEMPTS,
+    max_returned: int = MAX_RETURNED,
+    radius_growth: float = RADIUS_GROWTH,
+) -> LoopCandidates:
+    """Old submaps that the current scan registers onto, as the reference helper does.
+
+    1. Only submaps ``0 .. current_submap_id - sub_map_thresh`` are eligible
+       (``current_submap_id`` is the newest built submap; the ``sub_map_thresh``
+       newest are skipped).
+    2. Keep those whose centre is nearer than the radius to the scan's
+       position. The radius is ``search_radius + radius_growth * d``, with
+       ``d`` the distance flown since the submap (:func:`distance_flown_since`);
+       ``radius_growth=0`` is the reference's fixed radius.
+    3. Sort them by distance and register the scan to at most ``max_attempts``
+       of them: ``icp_fn(scan_points, submap, scan_pose)``.
+    4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
+       ``max_returned``, lowest RMSE first.
+    """
+    centres = np.asarray(submap_centres, dtype=float).reshape(-1, 3)
+    scan_points = check_points(scan_points, "the current scan")
+    scan_pose = check_pose(scan_pose, "the current scan pose")
+    _check_search(submaps, centres, current_submap_id, sub_map_thresh, search_radius, radius_growth)
+    _check_counts(loop_closure_threshold, max_attempts, max_returned)
+
+    # 1.-2. eligible submaps within the (growing) radius, nearest first
+    position = scan_pose[:3, 3]
+    eligible = centres[: max(0, current_submap_id - sub_map_thresh + 1)]
+    distance = np.linalg.norm(eligible - position, axis=1)
+    radius = search_radius + radius_growth * distance_flown_since(centres[: current_submap_id + 1], position)
+    near = np.flatnonzero(distance < radius[: len(eligible)])
+    near = near[np.argsort(distance[near], kind="stable")]
+
+    # 3. verify the nearest few by ICP
+    found = []
+    for submap_id in near[:max_attempts]:
+        pose, rmse = icp_fn(scan_points, submaps[submap_id], scan_pose)
+        log.debug("submap %d at %.1f m: ICP RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        if rmse < loop_closure_threshold:
+            found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
+
+    # 4. best first
+    found.sort(key=lambda item: item[0])
+    found = found[:max_returned]
+    return LoopCandidates(
+        np.array([f[1] for f in found], dtype=int),
+        np.array([f[0] for f in found], dtype=float),
+        np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
+    )
+
+
+def best_scan_match(
+    scan_points: np.ndarray,
+    current_id: int,
+    candidates: LoopCandidates,
+    scans: Sequence[np.ndarray],
+    poses: np.ndarray,
+    n_scans_per_submap: int,
+    rmse_threshold: float,
+    icp_fn: IcpFn,
+) -> LoopMatch | None:
+    """Register the current scan to every scan of the matching submaps; keep the best.
+
+    ``scans`` and ``poses`` are all accepted scans (own frames) and the pose
+    estimates the submaps were built with. The registration onto scan ``i``
+    starts from ``inv(poses[i]) @ candidates.poses[k]``, the scan's pose found
+    against its submap, seen from scan ``i``. The lowest-RMSE match becomes a
+    :class:`LoopMatch` ``(i, current_id)`` if its RMSE is below
+    ``rmse_threshold``; otherwise there is no loop (None).
+    """
+    scan_points = check_points(scan_points, "the current scan")
+    poses = np.asarray(poses, dtype=float)
+    best = None
+    for submap_id, submap_pose in zip(candidates.ids, candidates.poses, strict=True):
+        for i in scan_ids_of(int(submap_id), n_scans_per_submap):
+            if not 0 <= i < min(len(scans), len(poses)):
+                raise SlamError(f"submap {submap_id} holds scan {i}, but only {len(scans)} scans were given")
+            init = np.linalg.inv(check_pose(poses[i], f"the pose of scan {i}")) @ submap_pose
+            relative, rmse = icp_fn(scan_points, scans[i], init)
+            if best is None or rmse < best.rmse:
+                best = LoopMatch(i, int(current_id), check_pose(relative, "the ICP result"), float(rmse))
+    if best is None or not best.rmse < rmse_threshold:
+        log.debug("no loop edge: best scan RMSE %s m", None if best is None else round(best.rmse, 3))
+        return None
+    log.info("loop edge %d -> %d, ICP RMSE %.3f m", best.i, best.j, best.rmse)
+    return best
+
+
+def _check_search(submaps, centres, current_submap_id, sub_map_thresh, search_radius, radius_growth) -> None:
+    if not np.all(np.isfinite(centres)):
+        raise SlamError("the submap centres contain NaN or infinite values")
+    if not 0 <= current_submap_id < min(len(centres), len(submaps)):
+        raise SlamError(
+            f"current_submap_id {current_submap_id} is not among the {min(len(centres), len(submaps))} submaps given"
+        )
+    if sub_map_thresh < 0:
+        raise SlamError(f"sub_map_thresh must be zero or positive, got {sub_map_thresh}")
+    if not (np.isfinite(search_radius) and search_radius > 0):
+        raise SlamError(f"the search radius must be a positive number of metres, got {search_radius}")
+    if not (np.isfinite(radius_growth) and radius_growth >= 0):
+        raise SlamError(f"radius_growth must be zero or a positive fraction, got {radius_growth}")
+
+
+def _check_counts(loop_closure_threshold, max_attempts, max_returned) -> None:
+    if not (np.isfinite(loop_closure_threshold) and loop_closure_threshold > 0):
+        raise SlamError(f"the loop closure threshold must be a positive RMSE, got {loop_closure_threshold}")
+    if max_attempts < 1 or max_returned < 1:
+        raise SlamError(f"max_attempts and max_returned must be at least 1, got {max_attempts} and {max_returned}")

@@ -1,0 +1,205 @@
+"""Stage 3c: lidar odometry, scan to scan, as the reference's registration loop.
+
+Every ``skip_frames``-th scan is *accepted*. Each accepted scan is registered
+to the previous one: grid-average downsampling, FPFH descriptors, descriptor
+matching, a robust rigid fit (MSAC) and an ICP refinement. Chaining the
+relative transforms from the first ground-truth pose gives the trajectory.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import SlamConfig
+from .errors import SlamError
+from .features import check_points, fpfh, grid_average, match_features
+from .registration import estimate_rigid_msac, refine_icp
+
+log = logging.getLogger(__name__)
+
+ICP_GRID_STEP = 0.75  # m, grid of the clouds ICP refines on (finer than grid_step; 0 = the feature clouds)
+ICP_FALLBACK_RMSE = 1.5  # m, an ICP RMSE above this counts as a failed registration
+STAGES = ("downsample", "fpfh", "match", "msac", "icp")
+
+
+@dataclass
+class Frame:
+    """One scan, prepared for registration."""
+
+    points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
+    features: np.ndarray  # (N, 33) normalised FPFH descriptors
+    icp_points: np.ndarray  # (M, 3) the cloud ICP works on
+    timings: dict  # ms per preparation stage
+
+
+@dataclass
+class PairRegistration:
+    """Everything one scan-to-scan registration produced (moving -> fixed)."""
+
+    moving: np.ndarray  # (N, 3) downsampled moving scan
+    fixed: np.ndarray  # (M, 3) downsampled fixed scan
+    matches: np.ndarray  # (K, 2) index pairs (moving, fixed)
+    inliers: np.ndarray  # (K,) bool, matches the robust fit kept
+    T_coarse: np.ndarray  # 4 x 4, robust fit (or the fallback guess)
+    T_fine: np.ndarray  # 4 x 4, after ICP
+    rmse: float  # m, ICP inlier RMSE
+    timings: dict  # ms per stage
+    fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
+
+
+@dataclass
+class OdometryResult:
+    """The odometry over all accepted scans."""
+
+    indices: np.ndarray  # (K,) indices of the accepted scans
+    poses: np.ndarray  # (K, 4, 4) estimated sensor poses in the map frame
+    relative: np.ndarray  # (K-1, 4, 4) transform of accepted scan k+1 into the frame of scan k
+    n_matches: np.ndarray  # (K-1,) descriptor matches per step
+    n_inliers: np.ndarray  # (K-1,) matches kept by MSAC (0 when it failed)
+    rmse: np.ndarray  # (K-1,) m, ICP RMSE per step
+    timings: dict[str, np.ndarray]  # ms per stage and accepted scan, (K,) each; step 0 has no match/msac/icp
+    fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
+
+
+def prepare(scan: np.ndarray, config: SlamConfig) -> Frame:
+    """Downsample one scan and describe it."""
+    timings = {}
+    start = time.perf_counter()
+    points = grid_average(scan, config.grid_step)
+    icp_points = grid_average(scan, ICP_GRID_STEP) if ICP_GRID_STEP > 0 else points
+    timings["downsample"] = _ms(start)
+    start = time.perf_counter()
+    features = fpfh(points, config.neighbors)
+    timings["fpfh"] = _ms(start)
+    return Frame(points, features, icp_points, timings)
+
+
+def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.ndarray | None = None):
+    """Register ``moving`` onto ``fixed``; ``guess`` (4 x 4) is the fallback
+    initial transform (identity if None) when the robust fit fails or ICP
+    ends far off. Never raises on a hard pair: the reason is in ``fallback``."""
+    guess = np.eye(4) if guess is None else guess
+    timings, fallback = {}, None
+
+    # 1. Match descriptors (current scan = moving, previous scan = fixed).
+    start = time.perf_counter()
+    matches = match_features(moving.features, fixed.features, config.match_threshold, config.match_ratio)
+    timings["match"] = _ms(start)
+
+    # 2. Robust rigid fit on the matched points.
+    start = time.perf_counter()
+    inliers = np.zeros(len(matches), dtype=bool)
+    try:
+        T_coarse, inliers = estimate_rigid_msac(
+            moving.points[matches[:, 0]],
+            fixed.points[matches[:, 1]],
+            config.max_distance,
+            config.max_num_trials,
+            config.seed,
+        )
+    except SlamError as exc:
+        T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
+    timings["msac"] = _ms(start)
+
+    # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
+    start = time.perf_counter()
+    T_fine, rmse = _icp(moving, fixed, T_coarse, config)
+    if rmse > ICP_FALLBACK_RMSE and fallback is None:
+        T_retry, rmse_retry = _icp(moving, fixed, guess, config)
+        fallback = f"ICP RMSE {rmse:.2f} m > {ICP_FALLBACK_RMSE} m from the robust fit; "
+        if rmse_retry < rmse:
+            T_fine, rmse, T_coarse = T_retry, rmse_retry, guess
+            fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
+        else:
+            fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
+    timings["icp"] = _ms(start)
+    return PairRegistration(moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback)
+
+
+def register_pair(moving_scan, fixed_scan, config: SlamConfig | None = None, guess=None) -> PairRegistration:
+    """Downsample, describe, match, fit and refine one pair of scans
+    (moving -> fixed), returning everything a figure needs."""
+    config = config or SlamConfig()
+    moving = prepare(check_points(moving_scan, "the moving scan"), config)
+    fixed = prepare(check_points(fixed_scan, "the fixed scan"), config)
+    result = register_frames(moving, fixed, config, guess)
+    result.timings = {**moving.timings, **result.timings}
+    return result
+
+
+def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = None, progress=False) -> OdometryResult:
+    """Odometry over the accepted scans of a Dataset (or a list of (N, 3) scans).
+
+    ``first_pose`` (4 x 4) anchors the first accepted scan; by default the
+    dataset's first ground-truth pose (identity for a bare list of scans).
+    """
+    config = config or SlamConfig()
+    scans = getattr(dataset_or_scans, "scans", dataset_or_scans)
+    if first_pose is None:
+        poses_gt = getattr(dataset_or_scans, "poses", None)
+        first_pose = np.eye(4) if poses_gt is None else poses_gt[0]
+    first_pose = np.asarray(first_pose, dtype=np.float64)
+    if first_pose.shape != (4, 4):
+        raise SlamError(f"the first pose must be a 4 x 4 matrix, got shape {first_pose.shape}")
+    indices = np.arange(0, len(scans), config.skip_frames)
+    if len(indices) < 2:
+        raise SlamError(f"odometry needs at least 2 accepted scans, got {len(indices)} from {len(scans)} scans")
+
+    poses, relative = [first_pose], []
+    n_matches, n_inliers, rmse, fallbacks = [], [], [], []
+    timings = {stage: np.zeros(len(indices)) for stage in STAGES}
+    previous, motion = None, None
+    bar = _progress_bar(len(indices)) if progress else None
+    for k, index in enumerate(indices):
+        # 1. Downsample the accepted scan and extract its FPFH descriptors.
+        current = prepare(check_points(scans[index], f"scan {index}"), config)
+        for stage, ms in current.timings.items():
+            timings[stage][k] = ms
+        if previous is not None:
+            # 2. Register it to the previous accepted scan: match, robust fit, ICP.
+            pair = register_frames(current, previous, config, guess=motion)
+            for stage, ms in pair.timings.items():
+                timings[stage][k] = ms
+            if pair.fallback:
+                fallbacks.append((int(index), pair.fallback))
+                log.warning("scan %d: %s", index, pair.fallback)
+            # 3. Chain the relative motion onto the previous pose.
+            motion = pair.T_fine
+            relative.append(motion)
+            poses.append(poses[-1] @ motion)
+            n_matches.append(len(pair.matches))
+            n_inliers.append(int(pair.inliers.sum()))
+            rmse.append(pair.rmse)
+        previous = current
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    return OdometryResult(
+        indices=indices,
+        poses=np.array(poses),
+        relative=np.array(relative).reshape(-1, 4, 4),
+        n_matches=np.array(n_matches, dtype=np.int64),
+        n_inliers=np.array(n_inliers, dtype=np.int64),
+        rmse=np.array(rmse),
+        timings=timings,
+        fallbacks=fallbacks,
+    )
+
+
+def _icp(moving: Frame, fixed: Frame, init: np.ndarray, config: SlamConfig) -> tuple[np.ndarray, float]:
+    return refine_icp(moving.icp_points, fixed.icp_points, init, config.metric, config.inlier_distance)
+
+
+def _ms(start: float) -> float:
+    return 1000.0 * (time.perf_counter() - start)
+
+
+def _progress_bar(total: int):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc="odometry", unit="scan", leave=False)

@@ -1,0 +1,241 @@
+"""Stage 3b: rigid registration of two scans (the reference's ``estgeotform3d``
+with MSAC, and ``pcregistericp``).
+
+A transform ``T`` (4 x 4) maps *moving* points onto *fixed* points:
+``fixed ~ T[:3, :3] @ moving + T[:3, 3]``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import open3d as o3d
+
+from .config import METRICS
+from .errors import SlamError
+from .features import check_points, to_cloud
+
+SAMPLE_SIZE = 3  # point pairs that fix a rigid motion
+MIN_INLIERS = 2 * SAMPLE_SIZE  # the best hypothesis must explain at least this many matches
+HYPOTHESES_PER_CHUNK = 256  # hypotheses scored at once (bounds memory: chunk x matches floats)
+DEGENERATE_SINE = 0.05  # a sample triangle whose angle at its first corner has a sine below this is skipped
+REFIT_ROUNDS = 2  # least-squares refits on the inliers after the best hypothesis is chosen
+ICP_MAX_ITERATIONS = 30  # ICP stops after this many iterations ...
+ICP_RELATIVE_CHANGE = 1e-6  # ... or when fitness and RMSE change by less than this fraction
+ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane ICP needs
+
+
+def kabsch(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """Least-squares rigid transforms of batches of point sets.
+
+    ``moving`` and ``fixed`` are (..., N, 3); returns (..., 4, 4) transforms
+    that minimise the summed squared distance (Kabsch / Umeyama without
+    scale), solved with one batched SVD.
+    """
+    mc = moving.mean(axis=-2, keepdims=True)
+    fc = fixed.mean(axis=-2, keepdims=True)
+    cov = np.swapaxes(moving - mc, -1, -2) @ (fixed - fc)  # (..., 3, 3)
+    u, _, vt = np.linalg.svd(cov)
+    v = np.swapaxes(vt, -1, -2)
+    sign = np.where(np.linalg.det(v @ np.swapaxes(u, -1, -2)) < 0, -1.0, 1.0)
+    v[..., :, 2] *= sign[..., None]  # no reflections
+    rot = v @ np.swapaxes(u, -1, -2)
+    out = np.zeros((*rot.shape[:-2], 4, 4))
+    out[..., :3, :3] = rot
+    out[..., :3, 3] = fc[..., 0, :] - (rot @ np.swapaxes(mc, -1, -2))[..., 0]
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def estimate_rigid_msac(moving_pts, fixed_pts, max_distance: float, max_trials: int, seed: int = 0):
+    """Robust rigid transform from matched points, by MSAC.
+
+    ``moving_pts[i]`` is matched to ``fixed_pts[i]`` (both (K, 3)). All
+    ``max_trials`` 3-pair samples are drawn at once from
+    ``numpy.random.default_rng(seed)``; each gives the motion that carries its
+    moving triangle onto the fixed one (thin triangles are skipped), and all
+    are scored together with the MSAC cost ``sum(min(r^2, max_distance^2))`` over all pairs. The
+    cheapest hypothesis wins (the first one on a tie) and is refitted by least
+    squares on its inliers (residual below ``max_distance``, in metres).
+
+    Returns ``(T, inliers)``: the 4 x 4 transform and a (K,) boolean mask.
+    The same input and seed give the same result on any number of threads.
+    """
+    moving = check_points(moving_pts, "the matched moving points")
+    fixed = check_points(fixed_pts, "the matched fixed points")
+    if len(moving) != len(fixed):
+        raise SlamError(f"matched point lists differ in length: {len(moving)} moving and {len(fixed)} fixed")
+    if len(moving) < SAMPLE_SIZE:
+        raise SlamError(f"a rigid fit needs at least {SAMPLE_SIZE} matches, got {len(moving)}")
+    if not (np.isfinite(max_distance) and max_distance > 0) or max_trials < 1:
+        raise SlamError(f"max_distance must be positive and max_trials at least 1, got {max_distance}, {max_trials}")
+
+    # Work about the centroids: smaller numbers, better rounding in the cost expansion.
+    moving_centre, fixed_centre = moving.mean(axis=0), fixed.mean(axis=0)
+    moving_c, fixed_c = moving - moving_centre, fixed - fixed_centre
+    samples = _distinct_triples(np.random.default_rng(seed), len(moving), int(max_trials))
+    hypotheses, valid = _triangle_transforms(moving_c[samples], fixed_c[samples])
+    cost = _msac_costs(hypotheses, moving_c, fixed_c, max_distance)
+    cost[~valid] = np.inf
+    if not np.isfinite(cost).any():
+        raise SlamError(f"all {max_trials} samples of 3 matches were degenerate (collinear points)")
+    best = _uncentre(hypotheses[int(np.argmin(cost))], moving_centre, fixed_centre)
+    inliers = _squared_residuals(best[None], moving, fixed)[0] < max_distance**2
+    if inliers.sum() < MIN_INLIERS:
+        raise SlamError(
+            f"no rigid motion explains enough matches: the best of {max_trials} hypotheses has "
+            f"{inliers.sum()} inliers within {max_distance} m, at least {MIN_INLIERS} are needed"
+        )
+    for _ in range(REFIT_ROUNDS):
+        refit = kabsch(moving[inliers], fixed[inliers])
+        refit_inliers = _squared_residuals(refit[None], moving, fixed)[0] < max_distance**2
+        if refit_inliers.sum() < inliers.sum():
+            break
+        best, inliers = refit, refit_inliers
+    return best, inliers
+
+
+def _distinct_triples(rng: np.random.Generator, n: int, count: int) -> np.ndarray:
+    """(count, 3) index triples, three different indices in [0, n) each, uniformly."""
+    a = rng.integers(0, n, count)
+    b = rng.integers(0, n - 1, count)
+    b += b >= a
+    c = rng.integers(0, n - 2, count)
+    low, high = np.minimum(a, b), np.maximum(a, b)
+    c += c >= low
+    c += c >= high
+    return np.column_stack([a, b, c])
+
+
+def _triangle_transforms(moving: np.ndarray, fixed: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motions that carry each moving triangle onto its fixed one.
+
+    ``moving`` and ``fixed`` are (H, 3, 3) (three points each). Each triangle
+    gets an orthonormal frame (first edge, normal, their cross product); the
+    rotation maps one frame onto the other and the centroids onto each other.
+    Returns (H, 4, 4) transforms and an (H,) mask, False for triangles too
+    thin to fix a rotation.
+    """
+
+    def frames(tri):
+        e1 = tri[:, 1] - tri[:, 0]
+        normal = np.cross(e1, tri[:, 2] - tri[:, 0])
+        e1_len = np.linalg.norm(e1, axis=1)
+        n_len = np.linalg.norm(normal, axis=1)
+        ok = n_len > DEGENERATE_SINE * np.maximum(e1_len, 1e-12) * np.linalg.norm(tri[:, 2] - tri[:, 0], axis=1)
+        e1 = e1 / np.maximum(e1_len, 1e-12)[:, None]
+        e3 = normal / np.maximum(n_len, 1e-12)[:, None]
+        return np.stack([e1, np.cross(e3, e1), e3], axis=2), ok  # columns are the frame axes
+
+    moving_frame, ok_m = frames(moving)
+    fixed_frame, ok_f = frames(fixed)
+    rot = fixed_frame @ np.swapaxes(moving_frame, 1, 2)
+    out = np.zeros((len(rot), 4, 4))
+    out[:, :3, :3] = rot
+    out[:, :3, 3] = fixed.mean(axis=1) - (rot @ moving.mean(axis=1)[:, :, None])[:, :, 0]
+    out[:, 3, 3] = 1.0
+    return out, ok_m & ok_f
+
+
+def _msac_costs(transforms: np.ndarray, moving: np.ndarray, fixed: np.ndarray, max_distance: float) -> np.ndarray:
+    """(H,) MSAC cost of every hypothesis: the sum over pairs of min(r^2, max_distance^2).
+
+    The squared residual ``|R m + t - f|^2`` expands to
+    ``|m|^2 + |f|^2 + |t|^2 + 2 (R^T t).m - 2 vec(R).vec(f m^T) - 2 t.f``:
+    one matrix product of (H, 15) hypothesis terms by (15, K) pair terms
+    gives all residuals, a chunk of hypotheses at a time.
+    """
+    rot, t = transforms[:, :3, :3], transforms[:, :3, 3]
+    hyp = np.hstack([-2.0 * rot.reshape(-1, 9), 2.0 * (np.swapaxes(rot, 1, 2) @ t[:, :, None])[:, :, 0], -2.0 * t])
+    pairs = np.vstack([(fixed[:, :, None] * moving[:, None, :]).reshape(-1, 9).T, moving.T, fixed.T])
+    pair_const = (moving**2).sum(axis=1) + (fixed**2).sum(axis=1)
+    hyp_const = (t**2).sum(axis=1)
+    cost = np.empty(len(transforms))
+    for start in range(0, len(transforms), HYPOTHESES_PER_CHUNK):
+        stop = start + HYPOTHESES_PER_CHUNK
+        sq = hyp[start:stop] @ pairs
+        sq += pair_const
+        sq += hyp_const[start:stop, None]
+        np.minimum(sq, max_distance**2, out=sq)
+        cost[start:stop] = sq.sum(axis=1)
+    return cost
+
+
+def _uncentre(transform: np.ndarray, moving_centre: np.ndarray, fixed_centre: np.ndarray) -> np.ndarray:
+    """A transform between centred clouds, as one between the original clouds."""
+    out = transform.copy()
+    out[:3, 3] = transform[:3, 3] + fixed_centre - transform[:3, :3] @ moving_centre
+    return out
+
+
+def _squared_residuals(transforms: np.ndarray, moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
+    """(H, K) squared distances between each transformed moving point and its fixed partner."""
+    h = len(transforms)
+    moved = (transforms[:, :3, :3].reshape(3 * h, 3) @ moving.T).reshape(h, 3, len(moving))  # one matrix product
+    moved += transforms[:, :3, 3, None]
+    moved -= fixed.T
+    moved *= moved
+    return moved.sum(axis=1)
+
+
+def refine_icp(
+    moving,
+    fixed,
+    init,
+    metric: str = "plane-to-plane",
+    inlier_distance: float = 3.0,
+    max_iterations: int = ICP_MAX_ITERATIONS,
+) -> tuple[np.ndarray, float]:
+    """Refine ``init`` (4 x 4, moving -> fixed) by ICP; returns ``(T, rmse)``.
+
+    ``metric``: ``point-to-point``, ``point-to-plane`` (fixed-cloud normals
+    from ``ICP_NORMAL_NEIGHBORS`` neighbours) or ``plane-to-plane``
+    (generalized ICP). Pairs farther apart than ``inlier_distance`` (m) are
+    ignored. ICP stops after ``max_iterations`` or when the inlier fraction
+    and RMSE change by less than ``ICP_RELATIVE_CHANGE`` (relative).
+
+    ``rmse`` (m) is always the same measure, whatever the metric: the root
+    mean square distance from each moved moving point to its nearest fixed
+    point, over the pairs closer than ``inlier_distance``; ``inf`` if none is.
+    """
+    moving = check_points(moving, "the moving cloud", minimum=SAMPLE_SIZE)
+    fixed = check_points(fixed, "the fixed cloud", minimum=SAMPLE_SIZE)
+    init = np.asarray(init, dtype=np.float64)
+    if init.shape != (4, 4) or not np.isfinite(init).all():
+        raise SlamError(f"the initial transform must be a finite 4 x 4 matrix, got shape {init.shape}")
+    if metric not in METRICS:
+        raise SlamError(f"unknown ICP metric {metric!r}: use one of {', '.join(METRICS)}")
+    if not (np.isfinite(inlier_distance) and inlier_distance > 0):
+        raise SlamError(f"the ICP inlier distance must be a positive number of metres, got {inlier_distance!r}")
+
+    reg = o3d.pipelines.registration
+    source = to_cloud(moving)
+    target = to_cloud(fixed, normals_knn=ICP_NORMAL_NEIGHBORS if metric == "point-to-plane" else None)
+    criteria = reg.ICPConvergenceCriteria(ICP_RELATIVE_CHANGE, ICP_RELATIVE_CHANGE, int(max_iterations))
+    if metric == "plane-to-plane":
+        result = reg.registration_generalized_icp(
+            source, target, inlier_distance, init, reg.TransformationEstimationForGeneralizedICP(), criteria
+        )
+    else:
+        estimation = (
+            reg.TransformationEstimationPointToPlane()
+            if metric == "point-to-plane"
+            else reg.TransformationEstimationPointToPoint()
+        )
+        result = reg.registration_icp(source, target, inlier_distance, init, estimation, criteria)
+    transform = np.array(result.transformation)
+    return transform, icp_rmse(source, target, transform, inlier_distance)
+
+
+def icp_rmse(source, target, transform: np.ndarray, inlier_distance: float) -> float:
+    """Point-to-point RMSE (m) of the pairs closer than ``inlier_distance`` after ``transform``.
+
+    ``source`` and ``target`` are (N, 3) arrays or Open3D clouds.
+    """
+    if isinstance(source, np.ndarray):
+        source = to_cloud(check_points(source, "the moving cloud"))
+    if isinstance(target, np.ndarray):
+        target = to_cloud(check_points(target, "the fixed cloud"))
+    evaluation = o3d.pipelines.registration.evaluate_registration(source, target, inlier_distance, transform)
+    if len(evaluation.correspondence_set) == 0:
+        return float("inf")
+    return float(evaluation.inlier_rmse)

@@ -1,0 +1,109 @@
+"""Downsampling, FPFH descriptors and the descriptor matcher."""
+
+import numpy as np
+import pytest
+
+from helpers.errors import SlamError
+from helpers.features import fpfh, grid_average, match_features, normalise_descriptors
+
+
+def test_grid_average_means_each_cell_in_a_stable_order():
+    points = np.array([[0.1, 0.1, 0.1], [0.3, 0.5, 0.2], [1.2, 0.1, 0.1], [1.4, 0.3, 0.3], [-0.5, 0.2, 0.0]])
+    out = grid_average(points, 1.0)
+    np.testing.assert_allclose(out, [[-0.5, 0.2, 0.0], [0.2, 0.3, 0.15], [1.3, 0.2, 0.2]])
+    np.testing.assert_array_equal(grid_average(points[::-1], 1.0), out)
+
+
+def test_grid_average_refuses_bad_input():
+    with pytest.raises(SlamError, match="0 points"):
+        grid_average(np.zeros((0, 3)), 1.0)
+    with pytest.raises(SlamError, match="NaN"):
+        grid_average(np.array([[0.0, np.nan, 0.0]]), 1.0)
+    with pytest.raises(SlamError, match="grid step"):
+        grid_average(np.zeros((4, 3)), 0.0)
+
+
+def test_fpfh_is_normalised_and_rotation_invariant():
+    rng = np.random.default_rng(1)
+    xy = rng.uniform(-20, 20, (800, 2))
+    points = np.column_stack([xy, np.sin(xy[:, 0] / 4) * 3 + 0.1 * xy[:, 1]])
+    f = fpfh(points, 30)
+    assert f.shape == (800, 33)
+    np.testing.assert_allclose(np.linalg.norm(f, axis=1), 1.0)
+    c, s = np.cos(0.4), np.sin(0.4)
+    turned = points @ np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]]).T + [5.0, -2.0, 1.0]
+    # Angles near a bin edge may fall either side after rounding: most rows agree exactly, all nearly.
+    diff = np.abs(fpfh(turned, 30) - f).max(axis=1)
+    assert np.mean(diff < 1e-3) > 0.9
+    assert diff.max() < 0.1
+
+
+def test_normalisation_makes_histograms_fractions_then_unit_length():
+    raw = np.zeros((1, 33))
+    raw[0, [0, 11, 22]] = 200.0
+    np.testing.assert_allclose(normalise_descriptors(raw)[0, [0, 11, 22]], 1 / np.sqrt(3))
+
+
+def test_fpfh_refuses_too_few_points_and_nans():
+    with pytest.raises(SlamError, match="more than 60 points"):
+        fpfh(np.random.default_rng(0).random((60, 3)), 60)
+    with pytest.raises(SlamError, match="0 points"):
+        fpfh(np.zeros((0, 3)), 60)
+    cloud = np.random.default_rng(0).random((100, 3))
+    cloud[5, 2] = np.nan
+    with pytest.raises(SlamError, match="NaN"):
+        fpfh(cloud, 10)
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def test_matcher_honours_threshold_and_ratio():
+    fixed = np.eye(4)  # four orthogonal unit descriptors: normalised distance 1 between any two
+    # moving 0: close to fixed 0 (normalised distance 0.05), far from the rest -> kept
+    # moving 1: close to fixed 1 but at normalised distance 0.2 -> fails threshold 0.1, passes 0.3
+    # moving 2: halfway between fixed 2 and fixed 3 -> ratio 1, always rejected
+
+    def towards(i, j, dist):  # unit vector at normalised distance `dist` from e_i, in the (e_i, e_j) plane
+        chord = dist * np.sqrt(2)
+        theta = 2 * np.arcsin(chord / 2)
+        v = np.zeros(4)
+        v[i], v[j] = np.cos(theta), np.sin(theta)
+        return v
+
+    moving = np.array([towards(0, 1, 0.05), towards(1, 0, 0.2), _unit([0, 0, 1, 1])])
+    pairs = match_features(moving, fixed, threshold=0.1, ratio=0.97)
+    np.testing.assert_array_equal(pairs, [[0, 0]])
+    pairs = match_features(moving, fixed, threshold=0.3, ratio=0.97)
+    np.testing.assert_array_equal(pairs, [[0, 0], [1, 1]])
+    pairs = match_features(moving, fixed, threshold=1.0, ratio=1.0)  # equal distances never pass the ratio test
+    np.testing.assert_array_equal(pairs, [[0, 0], [1, 1]])
+
+
+def test_matcher_ratio_test_rejects_ambiguous_matches():
+    fixed = _unit([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
+    # best 0.05, second about 0.07: ratio about 0.7
+    moving = _unit([[1.0, 0.1, 0.0]])
+    d = np.linalg.norm(moving[0] - fixed, axis=1) / np.sqrt(2)
+    ratio = d.min() / d.max()
+    assert len(match_features(moving, fixed, threshold=1.0, ratio=ratio + 1e-6)) == 1
+    assert len(match_features(moving, fixed, threshold=1.0, ratio=ratio - 1e-6)) == 0
+    assert len(match_features(moving, fixed, threshold=d.min() - 1e-6, ratio=1.0)) == 0
+
+
+def test_matcher_keeps_only_mutual_matches():
+    fixed = _unit([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    moving = _unit([[1.0, 0.05, 0.0], [1.0, 0.01, 0.0]])  # both prefer fixed 0; only the nearer one keeps it
+    np.testing.assert_array_equal(match_features(moving, fixed, threshold=1.0, ratio=0.99), [[1, 0]])
+
+
+def test_matcher_refuses_bad_descriptors():
+    good = np.eye(3)
+    with pytest.raises(SlamError, match="NaN"):
+        match_features(np.full((2, 3), np.nan), good, 0.1, 0.9)
+    with pytest.raises(SlamError, match="non-empty"):
+        match_features(np.zeros((0, 3)), good, 0.1, 0.9)
+    with pytest.raises(SlamError, match="differ in length"):
+        match_features(np.eye(4), good, 0.1, 0.9)

@@ -1,0 +1,204 @@
+"""Loop candidates: radius, age, attempt and return limits, RMSE order, growing radius;
+then the best scan match and its edge convention, checked with a real ICP."""
+
+import numpy as np
+import open3d as o3d
+import pytest
+from scipy.spatial.transform import Rotation
+
+from helpers.errors import SlamError
+from helpers.loopclosure import (
+    LoopCandidates,
+    best_scan_match,
+    distance_flown_since,
+    find_loop_candidates,
+    icp_with,
+)
+from helpers.posegraph import PoseGraph
+from helpers.submaps import build_submaps
+
+RADIUS = 7.9  # m, the reference's loopClosureSearchRadius
+THRESHOLD = 0.6  # the reference's loopClosureThreshold and rmseThreshold
+SCAN = np.zeros((5, 3))
+
+
+def pose(yaw=0.0, t=(0, 0, 0)) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("z", yaw).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+class ScriptedIcp:
+    """Stands in for ICP: the fixed cloud's first coordinate names it; its RMSE comes from a script."""
+
+    def __init__(self, rmse_by_cloud):
+        self.rmse_by_cloud = rmse_by_cloud
+        self.calls = []  # (cloud id, moving, init)
+
+    def __call__(self, moving, fixed, init):
+        cloud = int(fixed[0, 0])
+        self.calls.append((cloud, moving, init))
+        return init @ pose(t=(0, 0, 0.01 * cloud)), self.rmse_by_cloud.get(cloud, 0.1)
+
+    @property
+    def ids(self):
+        return [c[0] for c in self.calls]
+
+
+def named_clouds(n):
+    return [np.full((4, 3), float(k)) for k in range(n)]
+
+
+def search(centres, icp, here=(0, 0, 0), current=None, thresh=0, **kw):
+    centres = np.asarray(centres, dtype=float)
+    current = len(centres) - 1 if current is None else current
+    kw.setdefault("radius_growth", 0.0)
+    return find_loop_candidates(
+        named_clouds(len(centres)), centres, SCAN, pose(t=here), current, thresh, RADIUS, THRESHOLD, icp, **kw
+    )
+
+
+def test_only_centres_within_the_radius_are_tried():
+    distances = [1.0, 20.0, 7.8, 7.9, 5.0, 8.0]
+    icp = ScriptedIcp({})
+    found = search([[d, 0, 0] for d in distances], icp, max_attempts=10)
+    assert icp.ids == [0, 4, 2]  # within 7.9 m (strictly), nearest first
+    assert sorted(found.ids) == [0, 2, 4]
+
+
+def test_the_most_recent_submaps_are_never_candidates():
+    centres = np.zeros((20, 3))  # all at the current position
+    icp = ScriptedIcp({})
+    search(centres, icp, current=19, thresh=15, max_attempts=20)
+    assert sorted(icp.ids) == [0, 1, 2, 3, 4]  # 15 newest (5..19) skipped
+    icp = ScriptedIcp({})
+    found = search(centres, icp, current=14, thresh=15, max_attempts=20)
+    assert icp.ids == [] and len(found.ids) == 0
+    icp = ScriptedIcp({})
+    search(centres, icp, current=6, thresh=3, max_attempts=20)  # later centres given but not yet current
+    assert sorted(icp.ids) == [0, 1, 2, 3]
+
+
+def test_at_most_three_attempts_nearest_first():
+    distances = [6.0, 2.0, 4.0, 1.0, 5.0, 3.0]
+    icp = ScriptedIcp({})
+    search([[0, d, 0] for d in distances], icp)
+    assert icp.ids == [3, 1, 5]  # 1 m, 2 m, 3 m
+
+
+def test_at_most_three_returned_sorted_by_rmse_below_threshold():
+    rmse = {0: 0.5, 1: 0.05, 2: 0.7, 3: 0.3, 4: 0.2, 5: 0.59}
+    icp = ScriptedIcp(rmse)
+    found = search(np.zeros((6, 3)), icp, max_attempts=6)
+    assert len(icp.calls) == 6
+    np.testing.assert_array_equal(found.ids, [1, 4, 3])  # 0.05, 0.2, 0.3; then 0.5 and 0.59 cut, 0.7 rejected
+    np.testing.assert_allclose(found.scores, [0.05, 0.2, 0.3])
+    found = search(np.zeros((6, 3)), ScriptedIcp(rmse), max_attempts=6, max_returned=10)
+    np.testing.assert_array_equal(found.ids, [1, 4, 3, 0, 5])
+
+
+def test_scan_registered_in_map_frame_from_the_current_pose():
+    here = pose(0.7, (3, 1, 700))
+    icp = ScriptedIcp({})
+    clouds = named_clouds(2)
+    found = find_loop_candidates(clouds, [[3, 1, 700], [3, 2, 700]], SCAN, here, 1, 0, RADIUS, THRESHOLD, icp)
+    for _, moving, init in icp.calls:
+        assert moving is not None and np.array_equal(moving, SCAN)
+        np.testing.assert_allclose(init, here)
+    np.testing.assert_allclose(found.poses[found.ids == 1][0], here @ pose(t=(0, 0, 0.01)))
+
+
+def test_distance_flown_since_follows_the_centres():
+    centres = np.array([[0, 0, 0], [100, 0, 0], [100, 100, 0]], dtype=float)
+    np.testing.assert_allclose(distance_flown_since(centres, np.array([100, 110, 0.0])), [210, 110, 10])
+
+
+def test_growing_radius_finds_what_the_fixed_radius_misses():
+    # a 400 m square flown back to near the start: odometry puts the start 10 m away
+    centres = np.array([[0, 0, 0], [200, 0, 0], [200, 200, 0], [0, 200, 0], [0, 100, 0]], dtype=float)
+    here = (10, 0, 0)
+    fixed = ScriptedIcp({})
+    assert len(search(centres, fixed, here=here, radius_growth=0.0).ids) == 0
+    assert fixed.ids == []
+    growing = ScriptedIcp({})
+    found = search(centres, growing, here=here, radius_growth=0.02)  # 7.9 + 0.02 * 710 m = 22.1 m
+    np.testing.assert_array_equal(found.ids, [0])
+
+
+def test_best_scan_match_keeps_the_lowest_rmse_below_threshold():
+    scans = named_clouds(9)  # scans 0..8, submaps of 3
+    poses = np.array([pose(t=(10.0 * k, 0, 0)) for k in range(9)])
+    seen = pose(0.1, (11, 1, 0))  # the current scan's pose found against each submap
+    candidates = LoopCandidates(np.array([2, 0]), np.array([0.1, 0.2]), np.array([seen, seen]))
+    icp = ScriptedIcp({0: 0.5, 1: 0.2, 2: 0.4, 6: 0.3, 7: 0.25, 8: 0.9})
+    match = best_scan_match(SCAN, 20, candidates, scans, poses, 3, THRESHOLD, icp)
+    assert sorted(icp.ids) == [0, 1, 2, 6, 7, 8]
+    assert (match.i, match.j, match.rmse) == (1, 20, 0.2)
+    init = {c: i for c, _, i in icp.calls}
+    np.testing.assert_allclose(init[1], np.linalg.inv(poses[1]) @ seen)
+    np.testing.assert_allclose(match.relative_pose, init[1] @ pose(t=(0, 0, 0.01)))
+    assert best_scan_match(SCAN, 20, candidates, scans, poses, 3, 0.2, ScriptedIcp(icp.rmse_by_cloud)) is None
+
+
+def test_bad_inputs_raise_slam_error():
+    icp = ScriptedIcp({})
+    with pytest.raises(SlamError, match="NaN"):
+        search([[0, 0, np.nan]], icp)
+    with pytest.raises(SlamError, match="current_submap_id"):
+        search(np.zeros((2, 3)), icp, current=2)
+    with pytest.raises(SlamError, match="radius_growth"):
+        search(np.zeros((2, 3)), icp, radius_growth=-0.1)
+    with pytest.raises(SlamError, match="rigid"):
+        find_loop_candidates(named_clouds(1), np.zeros((1, 3)), SCAN, np.ones((4, 4)), 0, 0, RADIUS, THRESHOLD, icp)
+    with pytest.raises(SlamError, match="max_attempts"):
+        search(np.zeros((2, 3)), icp, max_attempts=0)
+
+
+# -- with a real ICP: the frames and the edge convention fit together ----------
+def terrain(x, y):
+    return 3 * np.sin(x / 6) * np.cos(y / 9) + 2 * np.exp(-((x - 5) ** 2 + (y + 4) ** 2) / 20) + 0.05 * x
+
+
+def scan_at(true_pose, rng, n=4000, half=15.0):
+    """A patch of terrain around the pose, in the sensor frame (the sensor 50 m above)."""
+    xy = true_pose[:2, 3] + rng.uniform(-half, half, (n, 2))
+    world = np.column_stack([xy, terrain(xy[:, 0], xy[:, 1])])
+    return (world - true_pose[:3, 3]) @ true_pose[:3, :3]
+
+
+def open3d_icp(moving, fixed, init):
+    src, dst = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)) for p in (moving, fixed))
+    dst.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
+    estimation = o3d.pipelines.registration.TransformationEstimationPointToPlane()
+    criteria = o3d.pipelines.registration.ICPConvergenceCriteria(max_iteration=50)
+    result = o3d.pipelines.registration.registration_icp(src, dst, 3.0, init, estimation, criteria)
+    return np.asarray(result.transformation), result.inlier_rmse
+
+
+@pytest.mark.parametrize("icp", ["open3d", "package"])
+def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
+    icp_fn = open3d_icp if icp == "open3d" else icp_with("plane-to-plane", inlier_distance=3.0)
+    rng = np.random.default_rng(3)
+    truth = np.array([pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)])
+    scans = [scan_at(p, rng) for p in truth]
+    index = build_submaps(scans, truth, n_scans_per_submap=3, align_grid_step=0.5)
+    revisit = pose(2.0, (3.5, 1.5, 50))  # back over scans 1-2, heading turned
+    drifted = pose(2.0 + np.radians(2), (5.0, 0.5, 50.5))  # the odometry's guess: 1.8 m and 2 deg off
+    scan = scan_at(revisit, rng)
+    found = find_loop_candidates(index.points, index.centres, scan, drifted, 1, 1, RADIUS, THRESHOLD, icp_fn)
+    np.testing.assert_array_equal(found.ids, [0])
+    match = best_scan_match(scan, 6, found, scans, truth, 3, THRESHOLD, icp_fn)
+    expected = np.linalg.inv(truth[match.i]) @ revisit  # pose_j = pose_i @ T_ij
+    assert np.linalg.norm(match.relative_pose[:3, 3] - expected[:3, 3]) < 0.1
+    assert Rotation.from_matrix(expected[:3, :3].T @ match.relative_pose[:3, :3]).magnitude() < np.radians(0.3)
+    # and the pose graph reads the edge the same way: the loop pulls the drifted node back
+    graph = PoseGraph()
+    for p in truth:
+        graph.add_node(p)
+    for k in range(1, 6):
+        graph.add_odometry(k - 1, k, np.linalg.inv(truth[k - 1]) @ truth[k])
+    graph.add_node(drifted)
+    graph.add_loop(match.i, 6, match.relative_pose)
+    moved = graph.optimize(anchor_pose=truth[0]).poses[6]
+    assert np.linalg.norm(moved[:3, 3] - revisit[:3, 3]) < 0.1

@@ -1,0 +1,61 @@
+"""Odometry over a short stretch of the default flight, including a turn."""
+
+import numpy as np
+import pytest
+
+from helpers import create_dataset
+from helpers.config import SlamConfig
+from helpers.errors import SlamError
+from helpers.metrics import ate, rpe
+from helpers.odometry import run_odometry
+
+WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    rows = np.loadtxt("data/default_waypoints.csv", delimiter=",", skiprows=1)[WAYPOINT_ROWS]
+    path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
+    np.savetxt(path, rows, delimiter=",", header="x,y", comments="")
+    return create_dataset(waypoints_path=path)
+
+
+@pytest.fixture(scope="module")
+def odometry(flight):
+    return run_odometry(flight, flight.poses[0], SlamConfig())
+
+
+def test_odometry_meets_the_relative_error_bar(flight, odometry):
+    gt = flight.poses[odometry.indices]
+    np.testing.assert_array_equal(odometry.indices, np.arange(0, len(flight), 3))
+    np.testing.assert_allclose(odometry.poses[0], flight.poses[0])
+    step = rpe(odometry.poses, gt, delta=1)
+    assert step.translation.rmse <= 0.15, str(step)
+    assert step.rotation.rmse <= 0.1, str(step)
+    assert ate(odometry.poses, gt).rmse < 1.0
+    assert odometry.fallbacks == []
+
+
+def test_odometry_result_is_complete(odometry):
+    k = len(odometry.indices)
+    assert odometry.poses.shape == (k, 4, 4) and odometry.relative.shape == (k - 1, 4, 4)
+    assert len(odometry.n_matches) == len(odometry.n_inliers) == len(odometry.rmse) == k - 1
+    assert np.all(odometry.n_inliers >= 20) and np.all(odometry.n_inliers <= odometry.n_matches)
+    assert set(odometry.timings) == {"downsample", "fpfh", "match", "msac", "icp"}
+    np.testing.assert_allclose(odometry.poses[1:], odometry.poses[:-1] @ odometry.relative)
+
+
+def test_odometry_falls_back_on_a_hard_scan_instead_of_crashing(flight):
+    scans = list(flight.scans[:10])
+    rng = np.random.default_rng(0)
+    scans[6] = rng.uniform([-30, -140, -620], [30, 140, -570], (4000, 3))  # noise: nothing matches
+    result = run_odometry(scans, flight.poses[0], SlamConfig())
+    assert len(result.poses) == 4
+    # Scan 6 cannot be registered to scan 3, nor scan 9 to scan 6.
+    assert [index for index, _ in result.fallbacks] == [6, 9]
+    assert np.isfinite(result.poses).all()
+
+
+def test_odometry_refuses_too_few_scans(flight):
+    with pytest.raises(SlamError, match="at least 2 accepted scans"):
+        run_odometry(flight.scans[:2], np.eye(4), SlamConfig())

@@ -1,0 +1,197 @@
+"""The pose graph recovers known trajectories, and refuses bad input."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from helpers.errors import SlamError
+from helpers.posegraph import ICP_EDGE_SIGMAS, PoseGraph, information_from_sigmas, loop_view
+
+RING_NODES = 24
+RING_RADIUS = 50.0  # m
+NOISE_T = 0.1  # m, odometry translation noise per step (= ICP_EDGE_SIGMAS)
+NOISE_R = np.radians(0.3)  # rad, odometry rotation noise per step (= ICP_EDGE_SIGMAS)
+
+
+def pose(rotvec=(0, 0, 0), t=(0, 0, 0)) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_rotvec(rotvec).as_matrix()
+    T[:3, 3] = t
+    return T
+
+
+def ring(n: int = RING_NODES, radius: float = RING_RADIUS) -> np.ndarray:
+    """Like GTSAM's circlePose3: poses on a circle, heading along it, with a small altitude wave."""
+    angles = 2 * np.pi * np.arange(n) / n
+    return np.array(
+        [pose((0, 0, a + np.pi / 2), (radius * np.cos(a), radius * np.sin(a), 700 + 2 * np.sin(2 * a))) for a in angles]
+    )
+
+
+def ate(poses, truth) -> float:
+    return float(np.sqrt(np.mean(np.sum((poses[:, :3, 3] - truth[:, :3, 3]) ** 2, axis=1))))
+
+
+def relative(truth, i, j) -> np.ndarray:
+    return np.linalg.inv(truth[i]) @ truth[j]
+
+
+def noisy_ring_graph(truth, seed=0, sigmas=ICP_EDGE_SIGMAS) -> PoseGraph:
+    """Odometry with per-step noise, chained from an identity first pose (as the reference starts)."""
+    rng = np.random.default_rng(seed)
+    graph = PoseGraph()
+    graph.add_node(np.eye(4))
+    for k in range(1, len(truth)):
+        noise = pose(rng.normal(0, NOISE_R, 3), rng.normal(0, NOISE_T, 3))
+        graph.append(relative(truth, k - 1, k) @ noise, sigmas=sigmas)
+    return graph
+
+
+def add_true_loop(graph, truth, sigmas=ICP_EDGE_SIGMAS):
+    last = len(truth) - 1
+    graph.add_loop(0, last, relative(truth, 0, last), information_from_sigmas(sigmas))
+
+
+def add_wrong_loop(graph, truth, sigmas=ICP_EDGE_SIGMAS):
+    """Nodes on opposite sides of the ring (100 m apart) claimed to be 3 m apart."""
+    graph.add_loop(RING_NODES // 4, 3 * RING_NODES // 4, pose(t=(3, 0, 0)), information_from_sigmas(sigmas))
+
+
+def test_ring_recovered_from_noisy_odometry_and_one_loop():
+    truth = ring()
+    graph = noisy_ring_graph(truth)
+    add_true_loop(graph, truth)
+    result = graph.optimize(anchor_pose=truth[0])
+    before, after = ate(result.initial_poses, truth), ate(result.poses, truth)
+    # measured: 1.72 m -> 0.42 m
+    assert before > 1.0
+    assert after < 0.6
+    assert after < 0.5 * before
+    assert result.error_after < result.error_before
+    np.testing.assert_allclose(result.poses[0], truth[0], atol=1e-3)
+    np.testing.assert_allclose(result.loop_weights, [1.0])
+    assert result.loop_translation_error[0] < 0.2
+
+
+def test_ring_with_reference_identity_weights_still_improves():
+    truth = ring()
+    graph = noisy_ring_graph(truth, sigmas=np.ones(6))  # the reference's identity information everywhere
+    graph.add_loop(0, RING_NODES - 1, relative(truth, 0, RING_NODES - 1))
+    before = ate(truth[0] @ graph.initial_poses, truth)
+    after = ate(graph.optimize(anchor_pose=truth[0]).poses, truth)
+    assert after < 0.5 * before
+
+
+def test_exact_odometry_and_loop_give_the_truth():
+    truth = ring()
+    graph = PoseGraph()
+    graph.add_node(np.eye(4))
+    for k in range(1, RING_NODES):
+        graph.append(relative(truth, k - 1, k))
+    graph.add_loop(0, RING_NODES - 1, relative(truth, 0, RING_NODES - 1))
+    result = graph.optimize(anchor_pose=truth[0])
+    np.testing.assert_allclose(result.poses, truth, atol=1e-4)
+    assert result.error_before < 1e-6
+
+
+@pytest.mark.parametrize(("kernel", "limit"), [("cauchy", 0.6), ("huber", 4.0)])
+def test_wrong_loop_is_down_weighted_by_robust_kernel(kernel, limit):
+    truth = ring()
+    graph = noisy_ring_graph(truth)
+    add_true_loop(graph, truth)
+    add_wrong_loop(graph, truth)
+    trusting = graph.optimize(anchor_pose=truth[0], loop_kernel="none")
+    robust = graph.optimize(anchor_pose=truth[0], loop_kernel=kernel)
+    # measured: none 39.7 m, huber 3.0 m, cauchy 0.42 m
+    assert ate(trusting.poses, truth) > 10.0
+    assert ate(robust.poses, truth) < limit
+    assert robust.loop_weights[1] < 0.05  # the wrong loop is nearly ignored ...
+    assert robust.loop_weights[1] < robust.loop_weights[0]  # ... and trusted less than the right one
+    np.testing.assert_array_equal(robust.loop_pairs, [[0, RING_NODES - 1], [6, 18]])
+    np.testing.assert_allclose(trusting.loop_weights, [1.0, 1.0])
+
+
+def test_identity_weights_leave_a_wrong_loop_undetectable():
+    """Why ICP_EDGE_SIGMAS exists: with the reference's identity weights rotations are so cheap that
+    the wrong loop is satisfied by bending the ring, and the kernel sees no outlier to down-weight."""
+    truth = ring()
+    graph = noisy_ring_graph(truth, sigmas=np.ones(6))
+    add_true_loop(graph, truth, sigmas=np.ones(6))
+    add_wrong_loop(graph, truth, sigmas=np.ones(6))
+    result = graph.optimize(anchor_pose=truth[0], loop_kernel="cauchy")
+    assert ate(result.poses, truth) > 10.0  # measured 39.1 m
+    assert result.loop_weights[1] > 0.5
+
+
+@pytest.mark.parametrize("weighted", ["translation", "rotation"])
+def test_information_matrix_is_translation_first(weighted):
+    """A loop edge that weighs only translation moves only translation, and the other way round."""
+    odometry = pose((0, 0, 0.0), (10, 0, 0))
+    loop = pose((0, 0, 0.2), (10, 3, 0))  # disagrees in both rotation and translation
+    strong, weak = 1e6, 1e-6
+    diag = [strong] * 3 + [weak] * 3 if weighted == "translation" else [weak] * 3 + [strong] * 3
+    graph = PoseGraph()
+    graph.add_node(np.eye(4))
+    graph.append(odometry, sigmas=np.ones(6))
+    graph.add_loop(0, 1, loop, information=np.diag(diag))
+    moved = graph.optimize().poses[1]
+    follows_t, follows_r = (loop, odometry) if weighted == "translation" else (odometry, loop)
+    # The edges disagree by 3 m and 0.2 rad; a swapped ordering would miss by that much. The small
+    # slack is SE(3)'s own coupling of rotation and translation (measured 0.0021 rad, 0 m).
+    assert np.linalg.norm(moved[:3, 3] - follows_t[:3, 3]) < 0.05
+    assert Rotation.from_matrix(follows_r[:3, :3].T @ moved[:3, :3]).magnitude() < 0.01
+
+
+def test_anchor_moves_the_whole_graph_rigidly():
+    truth = ring(6)
+    graph = PoseGraph()
+    graph.add_node(np.eye(4))
+    for k in range(1, 6):
+        graph.append(relative(truth, k - 1, k))
+    result = graph.optimize(anchor_pose=truth[0])
+    np.testing.assert_allclose(result.poses, truth, atol=1e-6)
+    assert result.iterations >= 0
+
+
+def test_loop_view_gives_one_segment_per_loop():
+    truth = ring()
+    graph = noisy_ring_graph(truth)
+    add_true_loop(graph, truth)
+    add_wrong_loop(graph, truth)
+    positions, segments = loop_view(truth, graph.loop_pairs())
+    assert graph.loop_pairs() == [(0, RING_NODES - 1), (6, 18)]
+    assert positions.shape == (RING_NODES, 3)
+    np.testing.assert_allclose(segments[1], truth[[6, 18], :3, 3])
+
+
+def test_bad_inputs_raise_slam_error():
+    graph = PoseGraph()
+    with pytest.raises(SlamError, match="empty"):
+        graph.optimize()
+    with pytest.raises(SlamError, match="empty"):
+        graph.append(np.eye(4))
+    with pytest.raises(SlamError, match="rigid"):
+        graph.add_node(np.diag([2.0, 1, 1, 1]))
+    nan = np.eye(4)
+    nan[0, 3] = np.nan
+    with pytest.raises(SlamError, match="NaN"):
+        graph.add_node(nan)
+    with pytest.raises(SlamError, match="4 x 4"):
+        graph.add_node(np.eye(3))
+    graph.add_node(np.eye(4))
+    graph.append(pose(t=(1, 0, 0)))
+    asymmetric = np.eye(6)
+    asymmetric[0, 4] = 0.5
+    with pytest.raises(SlamError, match="symmetric"):
+        graph.add_loop(0, 1, np.eye(4), asymmetric)
+    with pytest.raises(SlamError, match="positive definite"):
+        graph.add_loop(0, 1, np.eye(4), np.diag([1, 1, 1, 1, 1, 0.0]))
+    with pytest.raises(SlamError, match="does not exist"):
+        graph.add_loop(0, 5, np.eye(4))
+    with pytest.raises(SlamError, match="sigmas"):
+        graph.append(np.eye(4), sigmas=[1, 1, 1, 1, 1, -1])
+    with pytest.raises(SlamError, match="loop_kernel"):
+        graph.optimize(loop_kernel="tukey")
+    graph.add_node(np.eye(4))  # joined by no edge
+    with pytest.raises(SlamError, match="no chain"):
+        graph.optimize()

@@ -1,0 +1,145 @@
+"""Robust rigid fit (MSAC) and ICP refinement, on synthetic matches and on real scans."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from helpers import create_dataset
+from helpers.errors import SlamError
+from helpers.registration import estimate_rigid_msac, kabsch, refine_icp
+
+WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    rows = np.loadtxt("data/default_waypoints.csv", delimiter=",", skiprows=1)[WAYPOINT_ROWS]
+    path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
+    np.savetxt(path, rows, delimiter=",", header="x,y", comments="")
+    return create_dataset(waypoints_path=path)
+
+
+def _transform(yaw_deg, translation):
+    out = np.eye(4)
+    out[:3, :3] = Rotation.from_euler("z", yaw_deg, degrees=True).as_matrix()
+    out[:3, 3] = translation
+    return out
+
+
+def _errors(estimate, truth):
+    error = np.linalg.inv(truth) @ estimate
+    return np.linalg.norm(error[:, 3][:3]), np.degrees(Rotation.from_matrix(error[:3, :3]).magnitude())
+
+
+def _displacement(estimate, truth, points):
+    """RMS distance (m) between the points moved by ``estimate`` and by ``truth``."""
+    return float(np.sqrt(np.mean(np.sum((_apply(estimate, points) - _apply(truth, points)) ** 2, axis=1))))
+
+
+def _apply(T, points):
+    return points @ T[:3, :3].T + T[:3, 3]
+
+
+def _matches_with_outliers(seed=3, n=1000, outlier_fraction=0.8):
+    rng = np.random.default_rng(seed)
+    moving = rng.uniform([-30, -140, -620], [30, 140, -570], (n, 3))
+    truth = _transform(30.0, [10.0, -4.0, 0.5])
+    fixed = _apply(truth, moving) + rng.normal(0, 0.05, (n, 3))
+    outliers = rng.random(n) < outlier_fraction
+    fixed[outliers] = rng.uniform([-30, -140, -620], [30, 140, -570], (outliers.sum(), 3))
+    return moving, fixed, truth, outliers
+
+
+def test_kabsch_recovers_a_batch_of_transforms():
+    rng = np.random.default_rng(0)
+    truths = np.array([_transform(a, t) for a, t in zip([0, 10, -30], rng.normal(0, 5, (3, 3)), strict=True)])
+    moving = rng.normal(0, 10, (3, 20, 3))
+    fixed = np.einsum("hij,hkj->hki", truths[:, :3, :3], moving) + truths[:, None, :3, 3]
+    np.testing.assert_allclose(kabsch(moving, fixed), truths, atol=1e-9)
+
+
+def test_msac_survives_80_percent_outliers():
+    moving, fixed, truth, outliers = _matches_with_outliers()
+    assert outliers.mean() > 0.75
+    T, inliers = estimate_rigid_msac(moving, fixed, max_distance=1.0, max_trials=3000, seed=0)
+    # The points lie 600 m below the sensor origin: judge the fit where the points are.
+    assert _displacement(T, truth, moving) < 0.05
+    assert _errors(T, truth)[1] < 0.05
+    assert (inliers == ~outliers).mean() > 0.99
+
+
+def test_msac_same_seed_same_answer_different_seed_still_right():
+    moving, fixed, truth, _ = _matches_with_outliers(seed=5)
+    first, mask = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=7)
+    again, mask_again = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=7)
+    np.testing.assert_array_equal(first, again)
+    np.testing.assert_array_equal(mask, mask_again)
+    other, _ = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=8)
+    assert _displacement(other, truth, moving) < 0.05
+
+
+def test_msac_bit_identical_across_thread_counts():
+    script = (
+        "import numpy as np, sys; sys.path.insert(0, '.'); from tests.test_registration import _matches_with_outliers;"
+        "from helpers.registration import estimate_rigid_msac;"
+        "m, f, _, _ = _matches_with_outliers(seed=11);"
+        "T, _ = estimate_rigid_msac(m, f, 1.0, 3000, 0); print(T.tobytes().hex())"
+    )
+    outputs = set()
+    for threads in ("1", "2"):
+        env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+        outputs.add(done.stdout.strip())
+    assert len(outputs) == 1
+
+
+def test_msac_refuses_too_few_matches_and_pure_noise():
+    with pytest.raises(SlamError, match="at least 3 matches"):
+        estimate_rigid_msac(np.zeros((2, 3)), np.zeros((2, 3)), 1.0, 100, 0)
+    rng = np.random.default_rng(2)
+    with pytest.raises(SlamError, match="enough matches"):
+        estimate_rigid_msac(rng.uniform(0, 1000, (40, 3)), rng.uniform(0, 1000, (40, 3)), 0.01, 200, 0)
+    with pytest.raises(SlamError, match="NaN"):
+        estimate_rigid_msac(np.full((5, 3), np.nan), np.zeros((5, 3)), 1.0, 100, 0)
+
+
+@pytest.mark.parametrize("metric", ["point-to-point", "point-to-plane", "plane-to-plane"])
+def test_icp_metrics_agree_on_an_easy_case(flight, metric):
+    scan = flight.scans[10]
+    truth = _transform(1.0, [0.8, -0.5, 0.2])
+    T, rmse = refine_icp(scan, _apply(truth, scan), np.eye(4), metric, 3.0)
+    dt, dr = _errors(T, truth)
+    assert dt < 0.05 and dr < 0.02
+    assert rmse < 0.05  # the same points: the residual vanishes whatever the metric
+
+
+def test_icp_refuses_bad_input(flight):
+    scan = flight.scans[0]
+    with pytest.raises(SlamError, match="metric"):
+        refine_icp(scan, scan, np.eye(4), "plane-to-point", 3.0)
+    with pytest.raises(SlamError, match="4 x 4"):
+        refine_icp(scan, scan, np.eye(3), "point-to-point", 3.0)
+    with pytest.raises(SlamError, match="points"):
+        refine_icp(np.zeros((0, 3)), scan, np.eye(4), "point-to-point", 3.0)
+
+
+@pytest.mark.parametrize(
+    ("yaw", "shift"), [(30.0, [10.0, 0.0, 0.0]), (-20.0, [-6.0, 8.0, 1.0]), (5.0, [0.0, -10.0, 0.0])]
+)
+def test_register_pair_recovers_a_known_transform_on_real_scans(flight, yaw, shift):
+    from helpers.odometry import register_pair
+
+    extra = _transform(yaw, shift)
+    i, j = 20, 23  # two accepted scans 6 m apart
+    truth = extra @ np.linalg.inv(flight.poses[i]) @ flight.poses[j]  # scan j -> moved frame of scan i
+    result = register_pair(flight.scans[j], _apply(extra, flight.scans[i]))
+    assert result.fallback is None
+    dt, dr = _errors(result.T_fine, truth)
+    assert dt < 0.15 and dr < 0.1, (dt, dr)
+    coarse_dt, coarse_dr = _errors(result.T_coarse, truth)
+    assert coarse_dt < 3.0 and coarse_dr < 1.0
+    assert result.inliers.sum() >= 20
