@@ -57,6 +57,8 @@ class SensorConfig:
 
 
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
+GRAPH_WEIGHTS = ("icp", "identity")
+LOOP_KERNELS = ("none", "huber", "cauchy")
 
 
 @dataclass(frozen=True)
@@ -74,6 +76,8 @@ class SlamConfig:
     metric: str = _param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane")
     inlier_distance: float = _param(3.0, "ICP ignores correspondences farther apart than this, metres")
     seed: int = _param(0, "seed of the robust fit's sampling")
+    icp_grid_step: float = _param(0.75, "grid of the clouds ICP refines on, metres (0: the feature clouds)")
+    icp_fallback_rmse: float = _param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
     # Mapping and loop closure (stages 4-5)
     align_grid_step: float = _param(1.2, "grid of the merge that builds submaps and the map, metres")
     loop_closure_search_radius: float = _param(7.9, "submaps whose centre is nearer than this (metres) are candidates")
@@ -81,6 +85,10 @@ class SlamConfig:
     sub_map_thresh: int = _param(15, "the most recent submaps are never loop candidates")
     loop_closure_threshold: float = _param(0.6, "ICP RMSE below which a submap matches")
     rmse_threshold: float = _param(0.6, "ICP RMSE below which the best scan match becomes a loop edge")
+    loop_search_growth: float = _param(0.02, "search radius grows by this share of the distance flown (0: reference)")
+    # Pose graph (stage 6)
+    graph_weights: str = _param("icp", "edge weights: icp (realistic sigmas) or identity (the reference)")
+    loop_kernel: str = _param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
 
     def __post_init__(self):
         positive = ("grid_step", "max_distance", "inlier_distance", "align_grid_step")
@@ -95,6 +103,11 @@ class SlamConfig:
         _check(self, "match_threshold", lambda v: 0 < v <= 1, "in (0, 1]")
         _check(self, "match_ratio", lambda v: 0 < v <= 1, "in (0, 1]")
         _check(self, "metric", lambda v: v in METRICS, f"one of {', '.join(METRICS)}")
+        _check(self, "icp_grid_step", lambda v: math.isfinite(v) and v >= 0, "zero or a positive number")
+        _check(self, "icp_fallback_rmse", lambda v: math.isfinite(v) and v > 0, "a positive number")
+        _check(self, "loop_search_growth", lambda v: math.isfinite(v) and v >= 0, "zero or a positive fraction")
+        _check(self, "graph_weights", lambda v: v in GRAPH_WEIGHTS, f"one of {', '.join(GRAPH_WEIGHTS)}")
+        _check(self, "loop_kernel", lambda v: v in LOOP_KERNELS, f"one of {', '.join(LOOP_KERNELS)}")
 
 
 @dataclass(frozen=True)
