@@ -23,6 +23,10 @@ def main(argv=None) -> int:
     _map_arguments(ds)
     ds.add_argument("--out", required=True, help="output folder (scans/, poses_gt.txt, map_gt.ply)")
 
+    run = sub.add_parser("run", help="create the dataset and run the whole SLAM pipeline on it")
+    _map_arguments(run)
+    run.add_argument("--out", required=True, help="output folder (metrics.json, trajectories, map.ply)")
+
     site = sub.add_parser("site", help="execute the notebooks and export them as a static HTML site")
     site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
     site.add_argument("--no-execute", action="store_true", help="export the notebooks as committed")
@@ -32,6 +36,8 @@ def main(argv=None) -> int:
     try:
         if args.command == "dataset":
             return _dataset(args)
+        if args.command == "run":
+            return _run(args)
         if args.command == "site":
             from .site import build_site
 
@@ -50,7 +56,7 @@ def main(argv=None) -> int:
 def _map_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", help=".las, .laz or .tar.gz holding one (default: the embedded scene)")
     parser.add_argument("--waypoints", help=".mat with gTruthTraj or .csv of x,y[,z] (default: a loop)")
-    parser.add_argument("--config", help="TOML file with [sensor] (and later [slam]) tables")
+    parser.add_argument("--config", help="TOML file with [sensor] and [slam] tables")
 
 
 def _dataset(args) -> int:
@@ -65,6 +71,28 @@ def _dataset(args) -> int:
     print(
         f"{len(data)} scans ({points / len(data):.0f} points each on average) of {data.name} "
         f"written to {out} in {time.perf_counter() - start:.1f} s"
+    )
+    return 0
+
+
+def _run(args) -> int:
+    from .config import load_config
+    from .dataset import create_dataset
+    from .pipeline import run_slam, write_run
+
+    config = load_config(args.config)
+    start = time.perf_counter()
+    interactive = sys.stderr.isatty()
+    data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
+    created = time.perf_counter() - start
+    result = run_slam(data, config.slam, progress=interactive)
+    result.runtime_s = {"dataset": created, **result.runtime_s}
+    out = write_run(result, config, args.out)
+    m = result.metrics()
+    print(
+        f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
+        f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "
+        f"{m['ate_rmse_optimized_m']:.2f} m (optimised); {m['runtime_s']['total']:.0f} s; written to {out}"
     )
     return 0
 

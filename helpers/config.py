@@ -157,6 +157,27 @@ def config_to_dict(config: Config) -> dict:
     return {name: _plain(value) for name, value in dataclasses.asdict(config).items()}
 
 
+def config_to_toml(config: Config) -> str:
+    """The configuration as a TOML file that :func:`load_config` reads back."""
+    lines = []
+    for table, values in config_to_dict(config).items():
+        lines.append(f"[{table}]")
+        for key, value in values.items():
+            lines.append(f"{key} = {_toml_value(value)}")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    return repr(value)
+
+
 def _build(cls, table: dict, where: str):
     fields = {f.name: f for f in dataclasses.fields(cls)}
     unknown = sorted(set(table) - set(fields))

@@ -4,9 +4,6 @@ with their ground-truth poses (the reference's ``helperCreateDataset``)."""
 from __future__ import annotations
 
 import logging
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -157,14 +154,7 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
     """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM)
     and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
     written in a temporary folder beside it that replaces it at the end."""
-    out_dir = Path(out_dir)
-    if out_dir.exists() and not out_dir.is_dir():
-        raise SlamError(f"output path {out_dir} exists and is not a folder")
-    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / "poses_gt.txt").is_file():
-        raise SlamError(f"output folder {out_dir} is not empty and holds no earlier dataset: choose another")
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
-    try:
+    with paths.atomic_dir(out_dir, "poses_gt.txt") as work:
         (work / "scans").mkdir()
         scans = dataset.scans
         if progress:
@@ -176,17 +166,7 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
         write_tum(work / "poses_gt.txt", dataset.poses)
         write_ply(work / "map_gt.ply", dataset.map_points)
         (work / "sensor.toml").write_text(_sensor_toml(dataset.sensor))
-        if out_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old.", dir=out_dir.parent))
-            os.replace(out_dir, old / "dataset")
-            os.replace(work, out_dir)
-            shutil.rmtree(old)
-        else:
-            os.replace(work, out_dir)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
-    return out_dir
+    return Path(out_dir)
 
 
 def _sensor_toml(sensor: SensorConfig) -> str:

@@ -14,7 +14,6 @@ stub.
 
 from __future__ import annotations
 
-import functools
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -37,6 +36,7 @@ MAX_RETURNED = 3  # matching submaps returned at most, best first
 # distance flown since the submap (2 % is a common lidar-odometry drift rate);
 # 0 keeps the reference's fixed radius.
 RADIUS_GROWTH = 0.02
+SURFACE_NEIGHBORS = 20  # neighbours of the normals that surface_rmse measures along
 
 IcpFn = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
 
@@ -64,10 +64,53 @@ class LoopMatch:
 
 
 def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP_ITERATIONS) -> IcpFn:
-    """An ``icp_fn`` that calls :func:`helpers.registration.refine_icp` with these settings."""
+    """An ``icp_fn``: :func:`helpers.registration.refine_icp` with these
+    settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE)."""
     from .registration import refine_icp
 
-    return functools.partial(refine_icp, metric=metric, inlier_distance=inlier_distance, max_iterations=max_iterations)
+    normals = {}  # id(fixed) -> (fixed, its normals): submaps are tried again and again
+
+    def icp(moving, fixed, init):
+        transform, _ = refine_icp(moving, fixed, init, metric, inlier_distance, max_iterations)
+        if id(fixed) not in normals:
+            normals[id(fixed)] = (fixed, surface_normals(fixed))
+        return transform, surface_rmse(moving, fixed, transform, inlier_distance, normals[id(fixed)][1])
+
+    return icp
+
+
+def surface_normals(points: np.ndarray) -> np.ndarray:
+    """Unit normals (N, 3) of a cloud, from :data:`SURFACE_NEIGHBORS` neighbours."""
+    from .features import to_cloud
+
+    return np.asarray(to_cloud(points, normals_knn=SURFACE_NEIGHBORS).normals)
+
+
+def surface_rmse(moving: np.ndarray, fixed: np.ndarray, transform: np.ndarray, inlier_distance: float, normals=None):
+    """RMS distance (m) from the moved points to the fixed cloud's *surface*:
+    each moved point is paired with its nearest fixed point (pairs farther
+    than ``inlier_distance`` are ignored) and measured along that point's
+    normal.
+
+    Why not the point-to-point RMSE the reference reports: this lidar's rows
+    are 2.1 m apart along the track, so two perfectly aligned scans taken
+    1 m apart have points about 1 m from their nearest neighbours, more than
+    when they are 1 m out of line (measured: 1.11 m aligned, 0.74 m when
+    1 m off). Measured along the normals, the error grows with the
+    misalignment (0.33 m aligned, 0.40 m at 1 m, 0.60 m at 3 m).
+    ``normals`` of ``fixed`` may be given when they are already known.
+    """
+    from scipy.spatial import cKDTree
+
+    moved = moving @ transform[:3, :3].T + transform[:3, 3]
+    distance, nearest = cKDTree(fixed).query(moved, distance_upper_bound=inlier_distance)
+    paired = np.isfinite(distance)
+    if paired.sum() < SURFACE_NEIGHBORS:
+        return float("inf")
+    normals = surface_normals(fixed) if normals is None else normals
+    q = nearest[paired]
+    along_normal = np.einsum("ij,ij->i", moved[paired] - fixed[q], normals[q])
+    return float(np.sqrt(np.mean(along_normal**2)))
 
 
 def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:

@@ -3,7 +3,12 @@
 from __future__ import annotations
 
 import os
+import shutil
+import tempfile
+from contextlib import contextmanager
 from pathlib import Path
+
+from .errors import SlamError
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO / "data"
@@ -17,3 +22,30 @@ def cache_dir() -> Path:
 def shared_data(name: str) -> Path:
     """A file of the real data kept beside the repository (``../shared/data``)."""
     return REPO.parent / "shared" / "data" / name
+
+
+@contextmanager
+def atomic_dir(out_dir: str | Path, marker: str):
+    """Write a folder all or nothing: yields a temporary folder beside
+    ``out_dir`` that replaces it when the block ends without error (and is
+    removed otherwise). An existing ``out_dir`` is replaced only if it is
+    empty or holds ``marker`` (a file an earlier run wrote)."""
+    out_dir = Path(out_dir)
+    if out_dir.exists() and not out_dir.is_dir():
+        raise SlamError(f"output path {out_dir} exists and is not a folder")
+    if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / marker).is_file():
+        raise SlamError(f"output folder {out_dir} is not empty and holds no earlier {marker}: choose another")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    work = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", dir=out_dir.parent))
+    try:
+        yield work
+        if out_dir.exists():
+            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old.", dir=out_dir.parent))
+            os.replace(out_dir, old / "previous")
+            os.replace(work, out_dir)
+            shutil.rmtree(old)
+        else:
+            os.replace(work, out_dir)
+    except BaseException:
+        shutil.rmtree(work, ignore_errors=True)
+        raise

@@ -202,3 +202,27 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     graph.add_loop(match.i, 6, match.relative_pose)
     moved = graph.optimize(anchor_pose=truth[0]).poses[6]
     assert np.linalg.norm(moved[:3, 3] - revisit[:3, 3]) < 0.1
+
+
+def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_dataset):
+    """Scans 629 and 0 are 1 m apart on the same track. Aligned by the true
+    pose, their points are ~1 m from their nearest neighbours (the rows are
+    2.1 m apart), so a point-to-point RMSE prefers a wrong alignment; the
+    distance along the normals does not."""
+    from scipy.spatial import cKDTree
+
+    from helpers.features import grid_average
+    from helpers.loopclosure import surface_rmse
+
+    moving, fixed = grid_average(default_dataset.scans[629], 0.75), grid_average(default_dataset.scans[0], 0.75)
+    truth = np.linalg.inv(default_dataset.poses[0]) @ default_dataset.poses[629]
+    surface, point = [], []
+    for offset in (0.0, 1.0, 3.0):
+        transform = truth.copy()
+        transform[0, 3] += offset
+        surface.append(surface_rmse(moving, fixed, transform, 3.0))
+        distance, _ = cKDTree(fixed).query(moving @ transform[:3, :3].T + transform[:3, 3], distance_upper_bound=3.0)
+        point.append(np.sqrt(np.mean(distance[np.isfinite(distance)] ** 2)))
+    assert surface[0] < surface[1] < surface[2]
+    assert surface[0] < 0.4 and surface[2] > 0.55
+    assert point[1] < point[0]  # the reference's measure is fooled here

@@ -1,0 +1,97 @@
+"""The whole pipeline on a short loop over the default scene, and on inputs
+where it cannot close a loop or cannot register at all."""
+
+import json
+
+import laspy
+import numpy as np
+import pytest
+
+import helpers
+from helpers.config import Config, SlamConfig
+from helpers.pipeline import run_slam, write_run
+from helpers.trajectory import read_tum
+from helpers.waypoints import loop_waypoints
+
+SHORT = SlamConfig(sub_map_thresh=3)  # a short loop has few submaps
+
+
+@pytest.fixture(scope="module")
+def short_loop(tmp_path_factory):
+    """A 200 m loop flown once and 30 m past its start (115 scans)."""
+    path = tmp_path_factory.mktemp("loop") / "loop.csv"
+    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
+    return helpers.create_dataset(waypoints_path=path)
+
+
+@pytest.fixture(scope="module")
+def short_run(short_loop):
+    return run_slam(short_loop, SHORT)
+
+
+def test_short_loop_is_closed_without_false_loops(short_run):
+    m = short_run.metrics()
+    assert m["n_loop_closures"] >= 1
+    assert m["n_false_loop_closures"] == 0
+    assert m["ate_rmse_optimized_m"] < m["ate_rmse_odometry_m"]
+    assert m["rpe_trans_1_m"] < 0.15 and m["rpe_rot_1_deg"] < 0.1
+    for loop in short_run.loops:  # every loop edge agrees with the truth
+        assert loop.error_m < 1.0 and loop.error_deg < 2.0 and loop.rmse < SHORT.rmse_threshold
+
+
+def test_nodes_are_the_accepted_scans_and_anchored(short_loop, short_run):
+    np.testing.assert_array_equal(short_run.indices, np.arange(0, len(short_loop), SHORT.skip_frames))
+    np.testing.assert_allclose(short_run.poses_optimized[0], short_loop.poses[0], atol=1e-6)
+    np.testing.assert_allclose(short_run.poses_odometry[0], short_loop.poses[0], atol=1e-12)
+    assert len(short_run.submaps) == len(short_run.indices) // SHORT.n_scans_per_submap
+
+
+def test_same_inputs_same_numbers(short_loop, short_run):
+    """Counts are identical; real numbers agree to 1e-9 (Open3D sums in
+    parallel, so the last bits may differ from run to run)."""
+    again = run_slam(short_loop, SHORT).metrics()
+    first = short_run.metrics()
+    for m in (again, first):
+        m.pop("runtime_s")
+    assert again.keys() == first.keys()
+    for key, value in first.items():
+        assert again[key] == (value if isinstance(value, int) else pytest.approx(value, rel=1e-9, abs=1e-12)), key
+
+
+def test_written_outputs(short_run, tmp_path):
+    out = write_run(short_run, Config(slam=SHORT), tmp_path / "run")
+    metrics = json.loads((out / "metrics.json").read_text())
+    for key in ("n_scans", "n_accepted", "n_loop_closures", "n_false_loop_closures", "ate_rmse_odometry_m"):
+        assert key in metrics
+    for key in ("ate_rmse_optimized_m", "rpe_trans_1_m", "rpe_rot_1_deg", "runtime_s", "config"):
+        assert key in metrics
+    assert metrics["config"]["slam"]["sub_map_thresh"] == 3
+    for name, poses in (("gt", short_run.poses_gt), ("optimized", short_run.poses_optimized)):
+        stamps, read = read_tum(out / f"trajectory_{name}.txt")
+        np.testing.assert_array_equal(stamps, short_run.indices)
+        np.testing.assert_allclose(read[:, :3, 3], poses[:, :3, 3], atol=1e-5)
+    assert (out / "map.ply").stat().st_size > 1000 and (out / "config.toml").is_file()
+
+
+def test_no_loop_possible_ends_with_odometry_only(short_loop):
+    result = run_slam(short_loop, SlamConfig(sub_map_thresh=1000))
+    m = result.metrics()
+    assert m["n_loop_closures"] == 0 and result.queries == []
+    np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
+
+
+def test_flat_map_falls_back_instead_of_crashing(tmp_path):
+    """Over a featureless plane nothing can be registered: every step is
+    recorded as a fallback, and the run still ends with a result."""
+    x, y = np.meshgrid(np.arange(-300.0, 300.0, 1.0), np.arange(-200.0, 200.0, 1.0))
+    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+    las.header.scales = [0.01, 0.01, 0.01]
+    las.x, las.y, las.z = x.ravel(), y.ravel(), np.full(x.size, 100.0)
+    las.write(tmp_path / "flat.las")
+    flight = tmp_path / "flight.csv"
+    np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
+    data = helpers.create_dataset(tmp_path / "flat.las", flight)
+    result = run_slam(data, SlamConfig())
+    assert len(result.odometry.fallbacks) == len(result.indices) - 1
+    assert all("robust fit failed" in reason or "ICP" in reason for _, reason in result.odometry.fallbacks)
+    assert np.isfinite(result.poses_optimized).all()
