@@ -1,5 +1,5 @@
 # Two commands do everything on a fresh Debian machine with Python 3.11:
-#   make run   - build the dataset and the executed tutorial as a static site
+#   make run   - the dataset, the whole SLAM run and the executed tutorial as a static site
 #   make test  - lint, unit tests and notebook regression tests (nbval)
 # Both create .venv and install what is missing first.
 
@@ -14,6 +14,7 @@ SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 
 run: $(STAMP)
 	$(PY) -m helpers dataset --out build/dataset
+	$(PY) -m helpers run --out build/run
 	$(PY) -m helpers site --out build/html
 
 test: $(STAMP)

@@ -23,7 +23,7 @@ from helpers import create_dataset
 from helpers.config import SlamConfig
 from helpers.features import to_cloud
 from helpers.metrics import ate, rpe
-from helpers.odometry import ICP_GRID_STEP, STAGES, prepare, run_odometry
+from helpers.odometry import ICP_TOLERANCE, STAGES, prepare, run_odometry
 
 
 def main() -> None:
@@ -38,7 +38,8 @@ def main() -> None:
     result = run_odometry(data, data.poses[0], config)
     wall = time.perf_counter() - start
     steps = slice(1, None)  # the first accepted scan is only downsampled and described
-    print(f"{len(result.indices)} accepted scans of {len(data)}, odometry {wall:.1f} s; ICP grid {ICP_GRID_STEP} m")
+    print(f"{len(result.indices)} accepted scans of {len(data)}, odometry {wall:.1f} s")
+    print(f"ICP grid {config.icp_grid_step} m, ICP tolerance {ICP_TOLERANCE} m")
     print("per accepted scan, ms (mean / median / 95th percentile):")
     total = sum(result.timings[stage][steps] for stage in STAGES)
     for name, values in [*((s, result.timings[s][steps]) for s in STAGES), ("total", total)]:

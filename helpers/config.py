@@ -87,6 +87,7 @@ class SlamConfig:
     rmse_threshold: float = _param(0.6, "ICP RMSE below which the best scan match becomes a loop edge")
     loop_search_growth: float = _param(0.02, "search radius grows by this share of the distance flown (0: reference)")
     # Pose graph (stage 6)
+    edges_back: int = _param(2, "each scan is also registered to the scan this many nodes back (1: the reference)")
     graph_weights: str = _param("icp", "edge weights: icp (realistic sigmas) or identity (the reference)")
     loop_kernel: str = _param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
 
@@ -106,6 +107,7 @@ class SlamConfig:
         _check(self, "icp_grid_step", lambda v: math.isfinite(v) and v >= 0, "zero or a positive number")
         _check(self, "icp_fallback_rmse", lambda v: math.isfinite(v) and v > 0, "a positive number")
         _check(self, "loop_search_growth", lambda v: math.isfinite(v) and v >= 0, "zero or a positive fraction")
+        _check(self, "edges_back", lambda v: v >= 1, "an integer of at least 1")
         _check(self, "graph_weights", lambda v: v in GRAPH_WEIGHTS, f"one of {', '.join(GRAPH_WEIGHTS)}")
         _check(self, "loop_kernel", lambda v: v in LOOP_KERNELS, f"one of {', '.join(LOOP_KERNELS)}")
 

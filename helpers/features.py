@@ -21,7 +21,8 @@ from .errors import SlamError
 HISTOGRAMS = 3  # FPFH is three histograms ...
 BINS = 11  # ... of 11 bins each
 UP = np.array([0.0, 0.0, 1.0])  # normals are turned towards the sensor, which looks down from +z
-MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache)
+MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache; measured best)
+REACH_MARGIN = 1e-3  # descriptor-distance slack against float32 rounding in the exhaustive search
 MAX_DESCRIPTOR_DISTANCE = np.sqrt(2.0)  # largest distance between unit descriptors with no negative entry
 
 
@@ -71,6 +72,11 @@ def fpfh(points, neighbors: int) -> np.ndarray:
 
     Normals come from the ``neighbors`` nearest points and point up (+z); the
     histograms use the same ``neighbors`` nearest points.
+
+    Cost (measured, 5.8k points, 60 neighbours): Open3D's FPFH is the
+    largest part of a scan's preparation. A numpy version sharing one
+    neighbour query between normals, SPFH and FPFH reproduced Open3D's
+    descriptors but took 2-3 times its CPU time, so Open3D's is kept.
     """
     points = check_points(points, "the cloud to describe")
     if neighbors < 3:
@@ -120,13 +126,16 @@ def match_features(f_moving, f_fixed, threshold: float, ratio: float) -> np.ndar
         raise SlamError(f"match threshold and ratio must lie in (0, 1], got {threshold} and {ratio}")
     if len(f_fixed) < 2:
         raise SlamError("the ratio test needs at least 2 fixed descriptors")
-    nearest, second = _two_nearest(f_moving, f_fixed)
+    # Runners-up are needed only where the nearest passes the threshold.
+    nearest, second = _two_nearest(f_moving, f_fixed, threshold * MAX_DESCRIPTOR_DISTANCE)
     best_d = _distance(f_moving, f_fixed[nearest])
-    second_d = _distance(f_moving, f_fixed[second])
-    keep = (best_d <= threshold) & (best_d < ratio * second_d)
+    keep = best_d <= threshold
+    candidates = np.flatnonzero(keep)
+    second_d = _distance(f_moving[candidates], f_fixed[second[candidates]])
+    keep[candidates] = (second[candidates] < 0) | (best_d[candidates] < ratio * second_d)
     moving = np.flatnonzero(keep)
     partners = nearest[moving]
-    back, _ = _two_nearest(f_fixed[partners], f_moving)
+    back, _ = _two_nearest(f_fixed[partners], f_moving, 0.0)  # the nearest only
     moving = moving[back == moving]
     return np.column_stack([moving, nearest[moving]]).astype(np.int64)
 
@@ -136,32 +145,54 @@ def _distance(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.linalg.norm(a - b, axis=1) / MAX_DESCRIPTOR_DISTANCE
 
 
-def _two_nearest(queries: np.ndarray, references: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _two_nearest(queries: np.ndarray, references: np.ndarray, reach: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Indices of the nearest and second-nearest reference of every query.
 
-    Exhaustive search: for unit descriptors the squared distance is
-    ``|q|^2 + |r|^2 - 2 q.r``, so a float32 matrix product, a block of rows at
-    a time, ranks all pairs (ties go to the lower index). With one reference
-    the second-nearest is the nearest.
+    Exhaustive search, the cost of the matcher: for every query ``q`` and
+    reference ``r`` the squared distance minus ``|q|^2`` (which does not
+    change the ranking) is ``|r|^2 - 2 q.r``, and appending a 1 to every
+    query and ``|r|^2`` under ``-2 r`` makes it one float32 matrix product,
+    a block of ``MATCH_BLOCK_ROWS`` rows at a time into one reused buffer
+    (no other pass over the block before the row minima; ties go to the
+    lower index). The second-nearest is searched only for the queries whose
+    nearest lies within ``reach`` (plain Euclidean distance; ``None``: all
+    queries, ``0``: none); the others get -1, as do all queries when there
+    is one reference. ``reach`` is widened by ``REACH_MARGIN`` against
+    float32 rounding.
+
+    Why exhaustive (measured on 5.8k FPFH descriptors a scan): a k-d tree in
+    33 dimensions (scipy, both cores, even bounded by the match radius) is
+    slower than this product, and a tree on the first 4-12 principal
+    components still leaves 300-480 candidates per query within the match
+    radius: descriptors of smooth ground crowd together.
     """
-    q = queries.astype(np.float32)
-    r_t = np.ascontiguousarray(references.T, dtype=np.float32)
-    r_sq = np.einsum("ji,ji->i", r_t, r_t)
+    q = np.empty((len(queries), queries.shape[1] + 1), dtype=np.float32)
+    q[:, :-1] = queries
+    q[:, -1] = 1.0
+    r = np.empty((references.shape[1] + 1, len(references)), dtype=np.float32)
+    r[:-1] = references.T
+    r[-1] = np.einsum("ij,ij->i", references, references)
+    r[:-1] *= -2.0
+    q_sq = np.einsum("ij,ij->i", queries, queries)
+    limit = np.inf if reach is None else (reach + REACH_MARGIN) ** 2
     first = np.empty(len(q), dtype=np.int64)
-    second = np.empty(len(q), dtype=np.int64)
-    buffer = np.empty((MATCH_BLOCK_ROWS, len(r_sq)), dtype=np.float32)  # reused: fresh pages are slow
+    second = np.full(len(q), -1, dtype=np.int64)
+    # One buffer reused by every block: fresh pages are slow on first touch.
+    buffer = np.empty((min(MATCH_BLOCK_ROWS, len(q)), len(references)), dtype=np.float32)
     for start in range(0, len(q), MATCH_BLOCK_ROWS):
-        rows = q[start : start + MATCH_BLOCK_ROWS]
-        block = buffer[: len(rows)]
-        np.matmul(rows, r_t, out=block)
-        block *= -2.0
-        block += r_sq  # squared distance minus |q|^2, which does not change the ranking
+        stop = min(start + MATCH_BLOCK_ROWS, len(q))
+        block = buffer[: stop - start]
+        np.matmul(q[start:stop], r, out=block)
         j = block.argmin(axis=1)
-        first[start : start + len(rows)] = j
-        if len(r_sq) > 1:
-            block[np.arange(len(rows)), j] = np.inf
-            j = block.argmin(axis=1)
-        second[start : start + len(rows)] = j
+        first[start:stop] = j
+        if len(references) < 2:
+            continue
+        rows = np.arange(len(block))
+        live = np.flatnonzero(block[rows, j] + q_sq[start:stop] <= limit)
+        if len(live) == 0:
+            continue
+        block[live, j[live]] = np.inf
+        second[start + live] = block[live].argmin(axis=1) if len(live) < len(block) else block.argmin(axis=1)
     return first, second
 
 

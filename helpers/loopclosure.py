@@ -65,16 +65,30 @@ class LoopMatch:
 
 def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP_ITERATIONS) -> IcpFn:
     """An ``icp_fn``: :func:`helpers.registration.refine_icp` with these
-    settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE)."""
-    from .registration import refine_icp
+    settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
 
-    normals = {}  # id(fixed) -> (fixed, its normals): submaps are tried again and again
+    The same scans and submaps are registered again and again, so each cloud
+    is made ready for ICP once (:func:`helpers.registration.icp_cloud`) and
+    its normals serve the score too.
+    """
+    from .odometry import ICP_TOLERANCE
+    from .registration import icp_cloud, refine_icp
+
+    prepared = {}  # id(points) -> (points, IcpCloud); holding points keeps the id unique
+    with_normals = metric if metric != "point-to-point" else "point-to-plane"  # the score needs normals
+
+    def ready(points):
+        if id(points) not in prepared:
+            prepared[id(points)] = (points, icp_cloud(points, with_normals))
+        return prepared[id(points)][1]
 
     def icp(moving, fixed, init):
-        transform, _ = refine_icp(moving, fixed, init, metric, inlier_distance, max_iterations)
-        if id(fixed) not in normals:
-            normals[id(fixed)] = (fixed, surface_normals(fixed))
-        return transform, surface_rmse(moving, fixed, transform, inlier_distance, normals[id(fixed)][1])
+        source, target = ready(moving), ready(fixed)
+        if metric == "point-to-point":
+            source, target = moving, fixed
+        transform, _ = refine_icp(source, target, init, metric, inlier_distance, max_iterations, ICP_TOLERANCE)
+        normals = np.asarray(ready(fixed).cloud.normals)
+        return transform, surface_rmse(moving, fixed, transform, inlier_distance, normals)
 
     return icp
 

@@ -53,6 +53,16 @@ class LoopClosure:
 
 
 @dataclass(frozen=True)
+class Edge:
+    """A registration ``pose_j = pose_i @ relative`` between two nodes."""
+
+    i: int
+    j: int
+    relative: np.ndarray
+    rmse: float  # m, surface RMSE of the registration
+
+
+@dataclass(frozen=True)
 class LoopQuery:
     """One loop-candidate query that registered at least one old submap."""
 
@@ -74,6 +84,7 @@ class SlamResult:
     submaps: SubmapIndex
     queries: list[LoopQuery]
     graph: OptimizationResult
+    extra_edges: list[Edge]  # odometry edges that skip nodes (see SlamConfig.edges_back)
     map_points: np.ndarray  # (M, 3) global map at the optimised poses
     n_scans: int  # scans in the dataset, accepted or not
     runtime_s: dict = field(default_factory=dict)
@@ -101,6 +112,7 @@ class SlamResult:
             "n_loop_closures": len(self.loops),
             "n_false_loop_closures": sum(loop.false for loop in self.loops),
             "n_odometry_fallbacks": len(self.odometry.fallbacks),
+            "n_extra_edges": len(self.extra_edges),
             "ate_rmse_odometry_m": odometry.rmse,
             "ate_rmse_optimized_m": optimized.rmse,
             "ate_max_optimized_m": optimized.max,
@@ -137,9 +149,11 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     submaps, queries = _submaps_and_loops(clouds, odometry.poses, dataset.poses[odometry.indices], config, progress)
     runtime["submaps_and_loop_closure"] = time.perf_counter() - start
 
-    # 4. Pose graph: odometry edges, loop edges, the first node anchored.
+    # 4. Pose graph: odometry edges, edges to older scans, loop edges, the
+    #    first node anchored.
     start = time.perf_counter()
-    graph = _pose_graph(odometry, [q.closure for q in queries if q.closure], config)
+    extra = _edges_back(clouds, odometry.relative, config)
+    graph = _pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
     optimized = graph.optimize(anchor_pose=dataset.poses[0], loop_kernel=config.loop_kernel)
     runtime["pose_graph"] = time.perf_counter() - start
 
@@ -157,6 +171,7 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
         submaps=submaps,
         queries=queries,
         graph=optimized,
+        extra_edges=extra,
         map_points=map_points,
         n_scans=len(dataset),
         runtime_s=runtime,
@@ -232,12 +247,33 @@ def _judged(match, poses_gt) -> LoopClosure:
     return closure
 
 
-def _pose_graph(odometry: OdometryResult, loops: list[LoopClosure], config: SlamConfig) -> PoseGraph:
+def _edges_back(clouds, relative: np.ndarray, config: SlamConfig) -> list[Edge]:
+    """Register every node to the nodes 2 .. ``edges_back`` before it, from
+    the chained odometry as the initial guess. Each extra edge measures the
+    motion again with other points, so the pose graph can average the
+    odometry's random errors instead of summing them. Registrations scored
+    above ``rmse_threshold`` are left out."""
+    icp = icp_with(config.metric, config.inlier_distance)
+    edges = []
+    for back in range(2, config.edges_back + 1):
+        for j in range(back, len(clouds)):
+            guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
+            transform, rmse = icp(clouds[j], clouds[j - back], guess)
+            if rmse < config.rmse_threshold:
+                edges.append(Edge(j - back, j, transform, rmse))
+            else:
+                log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
+    return edges
+
+
+def _pose_graph(odometry: OdometryResult, extra: list[Edge], loops: list[LoopClosure], config: SlamConfig):
     sigmas = ICP_EDGE_SIGMAS if config.graph_weights == "icp" else np.ones(6)
     graph = PoseGraph()
     graph.add_node(odometry.poses[0])
     for step in odometry.relative:
         graph.append(step, sigmas)
+    for edge in extra:
+        graph.add_odometry(edge.i, edge.j, edge.relative, sigmas)
     for loop in loops:
         graph.add_loop(loop.i, loop.j, loop.relative, information_from_sigmas(sigmas))
     return graph

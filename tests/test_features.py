@@ -1,5 +1,9 @@
 """Downsampling, FPFH descriptors and the descriptor matcher."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -107,3 +111,44 @@ def test_matcher_refuses_bad_descriptors():
         match_features(np.zeros((0, 3)), good, 0.1, 0.9)
     with pytest.raises(SlamError, match="differ in length"):
         match_features(np.eye(4), good, 0.1, 0.9)
+
+
+def _reference_matches(moving, fixed, threshold, ratio):
+    """The matcher's rules, written plainly in float64 (a slow but obvious reference)."""
+    d = np.linalg.norm(moving[:, None] - fixed[None], axis=2) / np.sqrt(2)
+    pairs = []
+    for i, row in enumerate(d):
+        order = np.argsort(row, kind="stable")
+        best, second = row[order[0]], row[order[1]]
+        j = order[0]
+        if best <= threshold and best < ratio * second and np.argmin(d[:, j]) == i:
+            pairs.append((i, j))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_matcher_agrees_with_a_plain_float64_reference(seed):
+    rng = np.random.default_rng(seed)
+    fixed = normalise_descriptors(rng.gamma(0.5, 1.0, (700, 33)))
+    moving = fixed[rng.permutation(700)[:500]] + rng.normal(0, 0.01, (500, 33))  # noisy copies ...
+    moving = np.vstack([moving, normalise_descriptors(rng.gamma(0.5, 1.0, (300, 33)))])  # ... and strangers
+    moving /= np.linalg.norm(moving, axis=1, keepdims=True)
+    for threshold, ratio in [(0.1, 0.97), (0.05, 0.8), (1.0, 1.0)]:
+        expected = _reference_matches(moving, fixed, threshold, ratio)
+        assert len(expected) > 0
+        np.testing.assert_array_equal(match_features(moving, fixed, threshold, ratio), expected)
+
+
+def test_matcher_gives_the_same_pairs_on_any_number_of_threads():
+    script = (
+        "import numpy as np; from helpers.features import match_features, normalise_descriptors;"
+        "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
+        "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
+        "print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97).tobytes().hex())"
+    )
+    outputs = set()
+    for threads in ("1", "2"):
+        env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+        outputs.add(done.stdout.strip())
+    assert len(outputs) == 1 and len(outputs.pop()) > 0

@@ -7,7 +7,7 @@ from helpers import create_dataset
 from helpers.config import SlamConfig
 from helpers.errors import SlamError
 from helpers.metrics import ate, rpe
-from helpers.odometry import run_odometry
+from helpers.odometry import Frame, prepare, register_frames, run_odometry
 
 WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
 
@@ -59,3 +59,16 @@ def test_odometry_falls_back_on_a_hard_scan_instead_of_crashing(flight):
 def test_odometry_refuses_too_few_scans(flight):
     with pytest.raises(SlamError, match="at least 2 accepted scans"):
         run_odometry(flight.scans[:2], np.eye(4), SlamConfig())
+
+
+def test_prepared_frames_register_like_bare_ones(flight):
+    # prepare() readies the ICP cloud once; a Frame built by hand, without it, must register the same.
+    config = SlamConfig()
+    moving, fixed = prepare(flight.scans[9], config), prepare(flight.scans[6], config)
+    assert moving.icp is not None and moving.icp.metric == config.metric
+    assert set(moving.timings) == {"downsample", "fpfh", "icp"}
+    bare_moving, bare_fixed = (Frame(f.points, f.features, f.icp_points, {}) for f in (moving, fixed))
+    ready = register_frames(moving, fixed, config)
+    bare = register_frames(bare_moving, bare_fixed, config)
+    np.testing.assert_array_equal(ready.matches, bare.matches)
+    np.testing.assert_allclose(ready.T_fine, bare.T_fine, atol=1e-9)

@@ -10,7 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from helpers import create_dataset
 from helpers.errors import SlamError
-from helpers.registration import estimate_rigid_msac, kabsch, refine_icp
+from helpers.registration import estimate_rigid_msac, icp_cloud, icp_rmse, kabsch, refine_icp
 
 WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
 
@@ -115,6 +115,36 @@ def test_icp_metrics_agree_on_an_easy_case(flight, metric):
     dt, dr = _errors(T, truth)
     assert dt < 0.05 and dr < 0.02
     assert rmse < 0.05  # the same points: the residual vanishes whatever the metric
+
+
+@pytest.mark.parametrize("metric", ["point-to-point", "point-to-plane", "plane-to-plane"])
+def test_icp_on_prepared_clouds_equals_icp_on_bare_points(flight, metric):
+    # Normals and covariances made once (what the odometry reuses) give what ICP computes itself.
+    moving, fixed = flight.scans[13], flight.scans[10]
+    init = np.linalg.inv(flight.poses[10]) @ flight.poses[13] @ _transform(0.3, [0.5, -0.4, 0.1])
+    T_bare, rmse_bare = refine_icp(moving, fixed, init, metric, 3.0)
+    T_ready, rmse_ready = refine_icp(icp_cloud(moving, metric), icp_cloud(fixed, metric), init, metric, 3.0)
+    np.testing.assert_allclose(T_ready, T_bare, atol=1e-9)
+    assert rmse_ready == pytest.approx(rmse_bare, abs=1e-9)
+    # The RMSE Open3D reports is the one of the returned transform.
+    assert rmse_ready == pytest.approx(icp_rmse(moving, fixed, T_ready, 3.0), abs=1e-9)
+
+
+def test_icp_tolerance_in_metres_stops_early_but_lands_nearby(flight):
+    moving, fixed = icp_cloud(flight.scans[13]), icp_cloud(flight.scans[10])
+    truth = np.linalg.inv(flight.poses[10]) @ flight.poses[13]
+    init = truth @ _transform(0.5, [1.0, -0.8, 0.2])
+    T_tight, _ = refine_icp(moving, fixed, init, tolerance=1e-6)
+    T_loose, _ = refine_icp(moving, fixed, init, tolerance=1e-3)
+    assert _displacement(T_loose, T_tight, flight.scans[13]) < 0.02
+
+
+def test_icp_refuses_a_cloud_prepared_for_another_metric(flight):
+    scan = flight.scans[0]
+    with pytest.raises(SlamError, match="prepared for point-to-point"):
+        refine_icp(icp_cloud(scan, "point-to-point"), scan, np.eye(4), "plane-to-plane", 3.0)
+    with pytest.raises(SlamError, match="tolerance"):
+        refine_icp(scan, scan, np.eye(4), "point-to-point", 3.0, tolerance=-1.0)
 
 
 def test_icp_refuses_bad_input(flight):
