@@ -153,6 +153,8 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     #    first node anchored.
     start = time.perf_counter()
     extra = _edges_back(clouds, odometry.relative, config)
+    runtime["edges_back"] = time.perf_counter() - start
+    start = time.perf_counter()
     graph = _pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
     optimized = graph.optimize(anchor_pose=dataset.poses[0], loop_kernel=config.loop_kernel)
     runtime["pose_graph"] = time.perf_counter() - start
