@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cached_property, lru_cache
 from pathlib import Path
 
 import numpy as np
@@ -52,9 +52,13 @@ class Dataset:
         """Distance (m) from map-frame points to the surface the rays hit."""
         import open3d as o3d
 
-        scene = Surface.from_height_field(self.surface).raycasting_scene()
         query = o3d.core.Tensor(np.asarray(points, np.float32))
-        return scene.compute_distance(query).numpy().astype(np.float64)
+        return self._scene.compute_distance(query).numpy().astype(np.float64)
+
+    @cached_property
+    def _scene(self):
+        """The surface's ray-casting scene, built on first use (about a second)."""
+        return Surface.from_height_field(self.surface).raycasting_scene()
 
 
 @lru_cache(maxsize=2)

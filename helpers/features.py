@@ -2,7 +2,7 @@
 reference's ``pcdownsample``, ``extractFPFHFeatures`` and ``pcmatchfeatures``).
 
 Descriptor normalisation, used everywhere in this package: Open3D's FPFH is
-three 11-bin histograms (angles alpha, phi, theta) that each sum to 200.
+three 11-bin histograms (in Open3D's order: angles theta, alpha, phi) that each sum to 200.
 :func:`fpfh` divides each histogram by its own sum, so that every bin is a
 fraction, then scales the whole 33-vector to unit Euclidean length. The
 *normalised distance* between two descriptors ``a`` and ``b`` is then
