@@ -32,6 +32,12 @@ from .trajectory import write_tum
 
 log = logging.getLogger(__name__)
 
+# The modules whose code decides a run's numbers: the cache of default_run
+# is keyed by their source (figure and report modules are left out).
+RUN_MODULES = (
+    "config", "dataset", "features", "loopclosure", "mapio", "odometry", "pipeline",
+    "posegraph", "registration", "scene", "sensor", "submaps", "waypoints",
+)  # fmt: skip
 FALSE_LOOP_M = 1.0  # a loop edge farther than this from the truth is false ...
 FALSE_LOOP_DEG = 2.0  # ... or turned by more than this
 
@@ -287,11 +293,15 @@ def _progress_bar(total: int):
     return tqdm(total=total, desc="submaps and loops", unit="scan", leave=False)
 
 
-def write_run(result: SlamResult, config: Config, out_dir) -> Path:
+def write_run(result: SlamResult, config: Config, out_dir, map_error=None) -> Path:
     """Write ``metrics.json``, the three TUM trajectories (one line per
     accepted scan, its dataset index as the stamp), ``map.ply`` and the
-    ``config.toml`` used, all or nothing."""
+    ``config.toml`` used, all or nothing. ``map_error``: the map's distances
+    to the ground-truth map (:func:`helpers.evaluation.map_errors`), if known."""
     metrics = result.metrics()
+    if map_error is not None:
+        metrics |= {"map_error_mean_m": map_error.mean, "map_error_median_m": map_error.median}
+        metrics["map_error_p95_m"] = map_error.p95
     metrics["config"] = config_to_dict(config)
     with paths.atomic_dir(out_dir, "metrics.json") as work:
         (work / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
@@ -312,7 +322,8 @@ def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
     the package's source, so any change recomputes). Notebooks 4 to 7 start
     from here instead of from hidden state."""
     config = config or Config()
-    source = b"".join(p.read_bytes() for p in sorted(Path(__file__).parent.glob("*.py")))
+    here = Path(__file__).parent
+    source = b"".join((here / f"{name}.py").read_bytes() for name in RUN_MODULES)
     key = hashlib.sha256(config_to_toml(config).encode() + source).hexdigest()[:16]
     cache = paths.cache_dir() / f"slam-{key}.pkl"
     dataset = create_dataset(sensor=config.sensor)
