@@ -149,6 +149,14 @@ def _window(x0, y0, cell, shape, cx, cy, half):
     return slice(i0, i1), slice(j0, j1)
 
 
+def _offsets(x0, y0, cell, window, centre):
+    """x and y of the window's cells relative to ``centre``, each (rows, cols)."""
+    rows, cols = window
+    xs = x0 + cell * np.arange(cols.start, cols.stop)
+    ys = y0 + cell * np.arange(rows.start, rows.stop)
+    return np.meshgrid(xs - centre[0], ys - centre[1])
+
+
 def _add_building(rng, x0, y0, cell, centre, bare, z, labels):
     length, width = rng.uniform(10, 42), rng.uniform(8, 22)
     height = rng.uniform(4, 14) if rng.random() < 0.85 else rng.uniform(18, 40)
@@ -158,9 +166,7 @@ def _add_building(rng, x0, y0, cell, centre, bare, z, labels):
     if window is None:
         return
     rows, cols = window
-    xs = x0 + cell * np.arange(cols.start, cols.stop)
-    ys = y0 + cell * np.arange(rows.start, rows.stop)
-    gx, gy = np.meshgrid(xs - centre[0], ys - centre[1])
+    gx, gy = _offsets(x0, y0, cell, window, centre)
     u = gx * np.cos(angle) + gy * np.sin(angle)
     v = -gx * np.sin(angle) + gy * np.cos(angle)
     footprint = (np.abs(u) < length / 2) & (np.abs(v) < width / 2)
@@ -185,9 +191,7 @@ def _add_tree(rng, x0, y0, cell, centre, bare, z, labels):
     if window is None:
         return
     rows, cols = window
-    xs = x0 + cell * np.arange(cols.start, cols.stop)
-    ys = y0 + cell * np.arange(rows.start, rows.stop)
-    gx, gy = np.meshgrid(xs - centre[0], ys - centre[1])
+    gx, gy = _offsets(x0, y0, cell, window, centre)
     r = np.hypot(gx, gy) / radius
     crown = r < 1.0
     block = labels[rows, cols]

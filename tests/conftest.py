@@ -36,3 +36,16 @@ def short_flight(tmp_path):
 def private_cache(tmp_path, monkeypatch):
     """Every test unpacks archives into its own cache folder."""
     monkeypatch.setenv("HELPERS_CACHE", str(tmp_path / "cache"))
+
+
+@pytest.fixture(scope="session")
+def flight_over(tmp_path_factory):
+    """Build the dataset of a stretch of the shipped loop: ``flight_over(rows)``."""
+
+    def make(rows: slice):
+        xy = helpers.read_waypoints(helpers.DEFAULT_WAYPOINTS)[rows]
+        path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
+        np.savetxt(path, xy, delimiter=",", header="x,y", comments="")
+        return helpers.create_dataset(waypoints_path=path)
+
+    return make

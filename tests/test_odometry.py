@@ -3,7 +3,6 @@
 import numpy as np
 import pytest
 
-from helpers import create_dataset
 from helpers.config import SlamConfig
 from helpers.errors import SlamError
 from helpers.metrics import ate, rpe
@@ -13,11 +12,8 @@ WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree tur
 
 
 @pytest.fixture(scope="module")
-def flight(tmp_path_factory):
-    rows = np.loadtxt("data/default_waypoints.csv", delimiter=",", skiprows=1)[WAYPOINT_ROWS]
-    path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
-    np.savetxt(path, rows, delimiter=",", header="x,y", comments="")
-    return create_dataset(waypoints_path=path)
+def flight(flight_over):
+    return flight_over(WAYPOINT_ROWS)
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers import create_dataset
 from helpers.errors import SlamError
 from helpers.registration import estimate_rigid_msac, icp_cloud, icp_rmse, kabsch, refine_icp
 
@@ -16,11 +15,8 @@ WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degre
 
 
 @pytest.fixture(scope="module")
-def flight(tmp_path_factory):
-    rows = np.loadtxt("data/default_waypoints.csv", delimiter=",", skiprows=1)[WAYPOINT_ROWS]
-    path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
-    np.savetxt(path, rows, delimiter=",", header="x,y", comments="")
-    return create_dataset(waypoints_path=path)
+def flight(flight_over):
+    return flight_over(WAYPOINT_ROWS)
 
 
 def _transform(yaw_deg, translation):
