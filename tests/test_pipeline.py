@@ -74,9 +74,10 @@ def test_written_outputs(short_run, tmp_path):
 
 
 def test_no_loop_possible_ends_with_odometry_only(short_loop):
-    result = run_slam(short_loop, SlamConfig(sub_map_thresh=1000))
+    """With no loop possible and no edges back, the graph is the odometry chain."""
+    result = run_slam(short_loop, SlamConfig(sub_map_thresh=1000, edges_back=1))
     m = result.metrics()
-    assert m["n_loop_closures"] == 0 and result.queries == []
+    assert m["n_loop_closures"] == 0 and result.queries == [] and result.extra_edges == []
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
 
 
