@@ -15,6 +15,7 @@ from .config import SensorConfig
 from .errors import SlamError
 from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
+from .progress import progress_bar
 from .scene import HeightField, default_scene
 from .sensor import Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
 from .trajectory import write_tum
@@ -91,7 +92,7 @@ def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | No
 
     check_coverage(field, xyz)
     poses = poses_from_waypoints(xyz)
-    bar = _progress_bar(len(poses), "casting scans") if progress else None
+    bar = progress_bar(len(poses), "casting scans") if progress else None
     try:
         batch = cast_scans(Surface.from_height_field(field), poses, sensor, bar)
     finally:
@@ -146,12 +147,6 @@ def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, senso
         log.info("waypoints already lie in the centred map frame: taken as they are")
     z = points[:, 2] * frame.scale_z if points.shape[1] == 3 else np.full(len(points), sensor.altitude)
     return np.column_stack([xy, z])
-
-
-def _progress_bar(total: int, what: str):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc=what, unit="scan", leave=False)
 
 
 def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False) -> Path:

@@ -29,6 +29,7 @@ import numpy as np
 from .config import SlamConfig
 from .errors import SlamError
 from .features import check_points, fpfh, grid_average, match_features
+from .progress import progress_bar
 from .registration import IcpCloud, estimate_rigid_msac, icp_cloud, refine_icp
 
 log = logging.getLogger(__name__)
@@ -172,7 +173,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = 
     n_matches, n_inliers, rmse, fallbacks = [], [], [], []
     timings = {stage: np.zeros(len(indices)) for stage in STAGES}
     previous, motion = None, None
-    bar = _progress_bar(len(indices)) if progress else None
+    bar = progress_bar(len(indices), "odometry") if progress else None
     for k, index in enumerate(indices):
         # 1. Downsample the accepted scan and extract its FPFH descriptors.
         current = prepare(check_points(scans[index], f"scan {index}"), config)
@@ -228,9 +229,3 @@ def _add(*timings: dict) -> dict:
 
 def _ms(start: float) -> float:
     return 1000.0 * (time.perf_counter() - start)
-
-
-def _progress_bar(total: int):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc="odometry", unit="scan", leave=False)

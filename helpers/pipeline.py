@@ -27,6 +27,7 @@ from .metrics import ate, rpe
 from .odometry import OdometryResult, run_odometry
 from .plyio import write_ply
 from .posegraph import ICP_EDGE_SIGMAS, OptimizationResult, PoseGraph, information_from_sigmas
+from .progress import progress_bar
 from .submaps import SubmapIndex, build_submap
 from .trajectory import write_tum
 
@@ -199,7 +200,7 @@ def _submaps_and_loops(clouds, poses, poses_gt, config: SlamConfig, progress: bo
 
     submaps = SubmapIndex(config.n_scans_per_submap, config.align_grid_step)
     queries: list[LoopQuery] = []
-    bar = _progress_bar(len(clouds)) if progress else None
+    bar = progress_bar(len(clouds), "submaps and loops") if progress else None
     for node, (cloud, pose) in enumerate(zip(clouds, poses, strict=True)):
         submaps.add_scan(cloud, pose)
         if len(submaps) > config.sub_map_thresh:
@@ -285,12 +286,6 @@ def _pose_graph(odometry: OdometryResult, extra: list[Edge], loops: list[LoopClo
     for loop in loops:
         graph.add_loop(loop.i, loop.j, loop.relative, information_from_sigmas(sigmas))
     return graph
-
-
-def _progress_bar(total: int):
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc="submaps and loops", unit="scan", leave=False)
 
 
 def write_run(result: SlamResult, config: Config, out_dir, map_error=None) -> Path:

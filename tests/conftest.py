@@ -1,6 +1,10 @@
 """Shared fixtures: the default dataset (built once per test session) and
 the real aerial tile kept beside the repository."""
 
+import os
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -49,3 +53,18 @@ def flight_over(tmp_path_factory):
         return helpers.create_dataset(waypoints_path=path)
 
     return make
+
+
+def outputs_on_1_and_2_threads(script: str) -> set[str]:
+    """What a Python one-liner prints when numpy/OpenMP may use 1 and then 2 threads."""
+    outputs = set()
+    for threads in ("1", "2"):
+        env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}
+        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+        outputs.add(done.stdout.strip())
+    return outputs
+
+
+@pytest.fixture()
+def thread_outputs():
+    return outputs_on_1_and_2_threads

@@ -1,9 +1,5 @@
 """Downsampling, FPFH descriptors and the descriptor matcher."""
 
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 
@@ -139,16 +135,12 @@ def test_matcher_agrees_with_a_plain_float64_reference(seed):
         np.testing.assert_array_equal(match_features(moving, fixed, threshold, ratio), expected)
 
 
-def test_matcher_gives_the_same_pairs_on_any_number_of_threads():
+def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
     script = (
         "import numpy as np; from helpers.features import match_features, normalise_descriptors;"
         "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
         "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
         "print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97).tobytes().hex())"
     )
-    outputs = set()
-    for threads in ("1", "2"):
-        env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}
-        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
-        outputs.add(done.stdout.strip())
+    outputs = thread_outputs(script)
     assert len(outputs) == 1 and len(outputs.pop()) > 0

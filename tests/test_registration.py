@@ -1,9 +1,5 @@
 """Robust rigid fit (MSAC) and ICP refinement, on synthetic matches and on real scans."""
 
-import os
-import subprocess
-import sys
-
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -78,18 +74,14 @@ def test_msac_same_seed_same_answer_different_seed_still_right():
     assert _displacement(other, truth, moving) < 0.05
 
 
-def test_msac_bit_identical_across_thread_counts():
+def test_msac_bit_identical_across_thread_counts(thread_outputs):
     script = (
         "import numpy as np, sys; sys.path.insert(0, '.'); from tests.test_registration import _matches_with_outliers;"
         "from helpers.registration import estimate_rigid_msac;"
         "m, f, _, _ = _matches_with_outliers(seed=11);"
         "T, _ = estimate_rigid_msac(m, f, 1.0, 3000, 0); print(T.tobytes().hex())"
     )
-    outputs = set()
-    for threads in ("1", "2"):
-        env = {**os.environ, "OMP_NUM_THREADS": threads, "OPENBLAS_NUM_THREADS": threads}
-        done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
-        outputs.add(done.stdout.strip())
+    outputs = thread_outputs(script)
     assert len(outputs) == 1
 
 
