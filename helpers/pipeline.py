@@ -111,7 +111,9 @@ class SlamResult:
     def metrics(self) -> dict:
         """The figures of the run, units in the names."""
         odometry, optimized = ate(self.poses_odometry, self.poses_gt), ate(self.poses_optimized, self.poses_gt)
-        rpe_1, rpe_10 = rpe(self.poses_optimized, self.poses_gt, 1), rpe(self.poses_optimized, self.poses_gt, 10)
+        rpe_1 = rpe(self.poses_optimized, self.poses_gt, 1)
+        long_enough = len(self.indices) > 10  # a short flight has no 10-step pairs: those figures are None
+        rpe_10 = rpe(self.poses_optimized, self.poses_gt, 10) if long_enough else None
         steps = self.odometry.timings
         return {
             "n_scans": self.n_scans,
@@ -125,8 +127,8 @@ class SlamResult:
             "ate_max_optimized_m": optimized.max,
             "rpe_trans_1_m": rpe_1.translation.rmse,
             "rpe_rot_1_deg": rpe_1.rotation.rmse,
-            "rpe_trans_10_m": rpe_10.translation.rmse,
-            "rpe_rot_10_deg": rpe_10.rotation.rmse,
+            "rpe_trans_10_m": rpe_10.translation.rmse if rpe_10 else None,
+            "rpe_rot_10_deg": rpe_10.rotation.rmse if rpe_10 else None,
             "graph_error_before": self.graph.error_before,
             "graph_error_after": self.graph.error_after,
             "runtime_s": {

@@ -96,3 +96,10 @@ def test_flat_map_falls_back_instead_of_crashing(tmp_path):
     assert len(result.odometry.fallbacks) == len(result.indices) - 1
     assert all("robust fit failed" in reason or "ICP" in reason for _, reason in result.odometry.fallbacks)
     assert np.isfinite(result.poses_optimized).all()
+
+
+def test_a_flight_too_short_for_10_step_errors_still_reports(flight_over):
+    result = run_slam(flight_over(slice(0, 12)))  # 4 accepted scans
+    m = result.metrics()
+    assert m["n_accepted"] == 4 and m["rpe_trans_10_m"] is None and m["rpe_rot_10_deg"] is None
+    assert m["rpe_trans_1_m"] < 0.15
