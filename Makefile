@@ -10,14 +10,14 @@ STAMP  := $(VENV)/.installed
 # Debian package : shared library it provides (checked with ldconfig)
 SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 
-.PHONY: run test lint notebooks html sysdeps setup clean
+.PHONY: run test lint notebooks html sysdeps browser setup clean
 
 run: $(STAMP)
 	$(PY) -m helpers dataset --out build/dataset
 	$(PY) -m helpers run --out build/run
 	$(PY) -m helpers site --out build/html
 
-test: $(STAMP)
+test: $(STAMP) browser
 	$(VENV)/bin/ruff check helpers tests benchmarks
 	$(VENV)/bin/ruff format --check helpers tests benchmarks
 	$(VENV)/bin/pytest
@@ -45,6 +45,19 @@ sysdeps:
 	    echo "error: missing Debian package(s):$$missing; run: sudo apt-get install$$missing" >&2; exit 1; \
 	  fi; \
 	fi
+
+# Debian's Chromium, for the test that opens the exported site in a headless
+# browser (tests/test_site.py); that test alone is skipped, with its reason,
+# where Chromium cannot be installed.
+browser:
+	@command -v chromium >/dev/null || { \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    echo "installing Debian's chromium for the browser test of the site"; \
+	    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium fonts-dejavu-core >/dev/null; } \
+	      || echo "warning: chromium could not be installed; the browser test of the site will be skipped" >&2; \
+	  else \
+	    echo "note: no chromium (sudo apt-get install chromium); the browser test of the site will be skipped" >&2; \
+	  fi; }
 
 clean:
 	rm -rf build data/cache .pytest_cache

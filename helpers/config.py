@@ -87,7 +87,9 @@ class SlamConfig:
     rmse_threshold: float = _param(0.6, "surface RMSE (m) below which the best scan match is a loop edge")
     loop_search_growth: float = _param(0.02, "search radius grows by this share of the distance flown (0: reference)")
     # Pose graph (stage 6)
-    edges_back: int = _param(2, "each scan is also registered to the scan this many nodes back (1: the reference)")
+    edges_back: int = _param(
+        4, "each scan is also registered to the scans up to this many nodes back (1: the reference)"
+    )
     graph_weights: str = _param("icp", "edge weights: icp (realistic sigmas) or identity (the reference)")
     loop_kernel: str = _param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
 

@@ -164,7 +164,7 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     extra = _edges_back(clouds, odometry.relative, config)
     runtime["edges_back"] = time.perf_counter() - start
     start = time.perf_counter()
-    graph = _pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
+    graph = build_pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
     optimized = graph.optimize(anchor_pose=dataset.poses[0], loop_kernel=config.loop_kernel)
     runtime["pose_graph"] = time.perf_counter() - start
 
@@ -277,16 +277,28 @@ def _edges_back(clouds, relative: np.ndarray, config: SlamConfig) -> list[Edge]:
     return edges
 
 
-def _pose_graph(odometry: OdometryResult, extra: list[Edge], loops: list[LoopClosure], config: SlamConfig):
-    sigmas = ICP_EDGE_SIGMAS if config.graph_weights == "icp" else np.ones(6)
+def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: SlamConfig) -> PoseGraph:
+    """The pose graph of a run: the first node at the first odometry pose, an
+    edge per odometry step, the ``extra`` edges that skip nodes and the
+    ``loops`` (anything with ``i``, ``j`` and ``relative``) as loop edges.
+
+    With ``graph_weights = "icp"`` every registration gets the sigmas of
+    :data:`ICP_EDGE_SIGMAS`, times the number of steps an edge spans: an edge
+    to the scan ``k`` nodes back is measured on a smaller overlap and is less
+    sure (on the default the along-track error of a ``k``-step edge grows
+    from 7.5 cm at ``k = 1`` to 12, 17 and 21 cm at 2, 3 and 4).
+    """
+    icp_weights = config.graph_weights == "icp"
+    sigmas = ICP_EDGE_SIGMAS if icp_weights else np.ones(6)
     graph = PoseGraph()
     graph.add_node(odometry.poses[0])
     for step in odometry.relative:
         graph.append(step, sigmas)
     for edge in extra:
-        graph.add_odometry(edge.i, edge.j, edge.relative, sigmas)
+        graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if icp_weights else 1))
+    information = information_from_sigmas(sigmas)
     for loop in loops:
-        graph.add_loop(loop.i, loop.j, loop.relative, information_from_sigmas(sigmas))
+        graph.add_loop(loop.i, loop.j, loop.relative, information)
     return graph
 
 

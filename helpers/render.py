@@ -9,6 +9,7 @@ survive a static HTML export and need no running kernel.
 from __future__ import annotations
 
 import io
+import re
 
 import matplotlib
 
@@ -31,6 +32,19 @@ COLORS = {
 }
 CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
 HEIGHT_CMAP = "gist_earth"
+# Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
+# blank offline; these characters need no font download.
+PLAYER_ICONS = {
+    "fa-minus": "\u2212",  # slower
+    "fa-fast-backward": "\u21e4",  # first frame
+    "fa-step-backward": "\u25c1",  # previous frame
+    "fa-play fa-flip-horizontal": "\u25c0",  # play backwards
+    "fa-pause": "\u2016",
+    "fa-play": "\u25b6",
+    "fa-step-forward": "\u25b7",  # next frame
+    "fa-fast-forward": "\u21e5",  # last frame
+    "fa-plus": "+",  # faster
+}
 WINDOW = (900, 600)
 
 
@@ -78,7 +92,32 @@ def show_figure(fig, fmt: str = "png", dpi: int = 80):
     return show(figure_image(fig, dpi), fmt)
 
 
-def cloud_view(
+def cloud_view(points: np.ndarray, window=WINDOW, **view) -> np.ndarray:
+    """Points drawn by :func:`draw_cloud` (``view`` are its arguments) as an
+    off-screen 3-D view of ``window`` pixels; returns an RGB array."""
+    plotter = draw_cloud(_plotter(window), points, **view)
+    image = plotter.screenshot(return_img=True)
+    plotter.close()
+    return image
+
+
+def explore(points: np.ndarray, window=WINDOW, **view):
+    """The view of :func:`cloud_view`, to turn, zoom and pan in JupyterLab
+    when :func:`helpers.display.interactive_views` allows it; otherwise the
+    same view as a still image."""
+    from .display import interactive_views
+
+    if not interactive_views():
+        return show(cloud_view(points, window, **view))
+    import pyvista as pv
+
+    plotter = pv.Plotter(notebook=True, window_size=list(window))
+    plotter.set_background("white")
+    return draw_cloud(plotter, points, **view).show(jupyter_backend="trame", return_viewer=True)
+
+
+def draw_cloud(
+    plotter,
     points: np.ndarray,
     scalars: np.ndarray | None = None,
     cmap: str = HEIGHT_CMAP,
@@ -92,11 +131,11 @@ def cloud_view(
     azimuth: float = -60.0,
     zoom: float = 1.3,
     scalar_title: str = "height (m)",
-    window=WINDOW,
     extra=(),
-) -> np.ndarray:
-    """Render points (coloured by ``scalars``, by default their height) and an
-    optional path as an off-screen 3-D view; returns an RGB array.
+):
+    """Add points (coloured by ``scalars``, by default their height) and an
+    optional path to a PyVista ``plotter``, and place its camera ``elevation``
+    degrees above the horizon and ``azimuth`` degrees from +x; returns it.
 
     ``extra`` is a sequence of ``(points, color)`` drawn as flat-coloured
     clouds. ``path_height`` draws the path at that height instead of its own
@@ -104,7 +143,6 @@ def cloud_view(
     """
     import pyvista as pv
 
-    plotter = _plotter(window)
     cloud = pv.PolyData(np.asarray(points, np.float32))
     cloud["value"] = points[:, 2] if scalars is None else scalars
     plotter.add_mesh(
@@ -127,9 +165,7 @@ def cloud_view(
     if title:
         plotter.add_text(title, font_size=11, color="black")
     _place_camera(plotter, points, elevation, azimuth, zoom)
-    image = plotter.screenshot(return_img=True)
-    plotter.close()
-    return image
+    return plotter
 
 
 def _place_camera(plotter, points, elevation, azimuth, zoom):
@@ -234,4 +270,11 @@ def scan_player(scans: list[np.ndarray], indices, interval_ms: int = 200, size=(
     with matplotlib.rc_context({"animation.frame_format": "jpeg", "savefig.dpi": 72}):
         html = anim.to_jshtml(default_mode="loop")
     plt.close(fig)
-    return html
+    return offline_player(html)
+
+
+def offline_player(html: str) -> str:
+    """Matplotlib's animation HTML without its one network resource: the
+    Font Awesome style sheet goes, and each button icon becomes a character."""
+    html = re.sub(r"<link[^>]*font-awesome[^>]*>\s*", "", html)
+    return re.sub(r'<i class="fa ([^"]+)"></i>', lambda m: PLAYER_ICONS.get(m.group(1), m.group(0)), html)

@@ -1,21 +1,29 @@
 """The static site: the notebooks executed in order and exported to HTML,
 with an index page linking them. Images and animations are embedded in each
-page, so the site opens from disk with no server and no network."""
+page and MathJax is copied beside the pages (from the ``jupyter-server-mathjax``
+package), so the site opens from disk with no server and no network."""
 
 from __future__ import annotations
 
+import contextlib
 import html
+import importlib.util
 import logging
+import os
 import shutil
 import tempfile
 from pathlib import Path
 
 from . import paths
+from .display import VIEW_MODE_VARIABLE
 from .errors import SlamError
 
 log = logging.getLogger(__name__)
 NOTEBOOKS = paths.REPO / "notebooks"
 TIMEOUT_S = 1800  # per notebook
+TEMPLATE = Path(__file__).parent / "templates" / "offline.html.j2"
+MATHJAX_DIR = "mathjax"  # the site's copy of MathJax 2.7, beside the pages
+MATHJAX_URL = f"{MATHJAX_DIR}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"  # the one full config it ships
 
 
 def notebook_paths() -> list[Path]:
@@ -33,19 +41,26 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
 
     out_dir = Path(out_dir)
     work = Path(tempfile.mkdtemp(prefix=".site.", dir=_parent(out_dir)))
-    exporter = HTMLExporter(template_name="lab")
+    exporter = HTMLExporter(
+        template_name="lab",
+        template_file=str(TEMPLATE),
+        mathjax_url=MATHJAX_URL,
+    )
     pages = []
     try:
         for path in notebook_paths():
             notebook = nbformat.read(path, as_version=4)
             if execute:
                 log.info("executing %s", path.name)
-                NotebookClient(notebook, timeout=TIMEOUT_S, resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+                with _static_views():
+                    where = {"metadata": {"path": str(NOTEBOOKS)}}
+                    NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
             body, _ = exporter.from_notebook_node(notebook)
             page = path.with_suffix(".html").name
             (work / page).write_text(body, encoding="utf-8")
             pages.append((page, _title(notebook, path)))
         (work / "index.html").write_text(_index(pages), encoding="utf-8")
+        _copy_mathjax(work / MATHJAX_DIR)
         if out_dir.exists():
             shutil.rmtree(out_dir)
         work.replace(out_dir)
@@ -53,6 +68,30 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         shutil.rmtree(work, ignore_errors=True)
         raise
     return out_dir / "index.html"
+
+
+@contextlib.contextmanager
+def _static_views():
+    """Kernels started inside draw their 3-D views as pictures: an
+    interactive view needs a live kernel, which a page on disk has not."""
+    before = os.environ.get(VIEW_MODE_VARIABLE)
+    os.environ[VIEW_MODE_VARIABLE] = "static"
+    try:
+        yield
+    finally:
+        if before is None:
+            del os.environ[VIEW_MODE_VARIABLE]
+        else:
+            os.environ[VIEW_MODE_VARIABLE] = before
+
+
+def _copy_mathjax(target: Path) -> None:
+    """MathJax's scripts and web fonts, without its translations (2 of its 12 MB)."""
+    spec = importlib.util.find_spec("jupyter_server_mathjax")  # found, not imported: it is a server extension
+    if spec is None:
+        raise SlamError("the site needs MathJax: pip install jupyter-server-mathjax (see environment.txt)")
+    source = Path(spec.submodule_search_locations[0]) / "static"
+    shutil.copytree(source, target, ignore=shutil.ignore_patterns("localization"))
 
 
 def _parent(out_dir: Path) -> Path:

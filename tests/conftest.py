@@ -10,6 +10,12 @@ import pytest
 
 import helpers
 from helpers import paths
+from helpers.display import VIEW_MODE_VARIABLE
+
+# nbval compares the notebooks with their committed outputs, which are still
+# pictures: its kernels (started from this process) must draw 3-D views as
+# pictures too, whatever is installed.
+os.environ[VIEW_MODE_VARIABLE] = "static"
 
 AUTZEN = paths.shared_data("autzen_trim.laz")
 

@@ -2,6 +2,7 @@
 where it cannot close a loop or cannot register at all."""
 
 import json
+from types import SimpleNamespace
 
 import laspy
 import numpy as np
@@ -9,7 +10,7 @@ import pytest
 
 import helpers
 from helpers.config import Config, SlamConfig
-from helpers.pipeline import run_slam, write_run
+from helpers.pipeline import Edge, build_pose_graph, run_slam, write_run
 from helpers.trajectory import read_tum
 from helpers.waypoints import loop_waypoints
 
@@ -103,3 +104,21 @@ def test_a_flight_too_short_for_10_step_errors_still_reports(flight_over):
     m = result.metrics()
     assert m["n_accepted"] == 4 and m["rpe_trans_10_m"] is None and m["rpe_rot_10_deg"] is None
     assert m["rpe_trans_1_m"] < 0.15
+
+
+def _shift(x: float) -> np.ndarray:
+    transform = np.eye(4)
+    transform[0, 3] = x
+    return transform
+
+
+@pytest.mark.parametrize(("weights", "expected_x"), [("icp", 2.1), ("identity", 2.2)])
+def test_an_edge_spanning_k_steps_has_k_times_the_sigmas(weights, expected_x):
+    """Two 1 m steps and an edge over both that says 2.3 m. With sigmas s,
+    s and 2s (icp weights) least squares puts node 2 at 2.1 m; with equal
+    weights (the reference's identity) at 2.2 m."""
+    odometry = SimpleNamespace(poses=np.stack([_shift(0.0), _shift(1.0), _shift(2.0)]), relative=[_shift(1.0)] * 2)
+    graph = build_pose_graph(odometry, [Edge(0, 2, _shift(2.3), rmse=0.1)], [], SlamConfig(graph_weights=weights))
+    poses = graph.optimize().poses
+    assert poses[2][0, 3] == pytest.approx(expected_x, abs=1e-6)
+    assert poses[1][0, 3] == pytest.approx(expected_x / 2, abs=1e-6)
