@@ -2,8 +2,10 @@
 camera) and trajectories with matplotlib, in the same colours everywhere.
 
 Every function returns something a notebook displays as a still image (PNG
-bytes inside ``IPython.display.Image``) or an HTML animation, so the pictures
-survive a static HTML export and need no running kernel.
+or JPEG bytes inside ``IPython.display.Image``) or an HTML animation, so the
+pictures survive a static HTML export and need no running kernel. The one
+exception is :func:`explore`, which in a live JupyterLab kernel with trame
+returns an interactive view instead (decided by :mod:`helpers.display`).
 """
 
 from __future__ import annotations

@@ -5,7 +5,6 @@ package), so the site opens from disk with no server and no network."""
 
 from __future__ import annotations
 
-import contextlib
 import html
 import importlib.util
 import logging
@@ -13,6 +12,7 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
+from unittest import mock
 
 from . import paths
 from .display import VIEW_MODE_VARIABLE
@@ -52,7 +52,8 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
             notebook = nbformat.read(path, as_version=4)
             if execute:
                 log.info("executing %s", path.name)
-                with _static_views():
+                # Its kernel draws 3-D views as pictures: a page on disk has no kernel to talk to.
+                with mock.patch.dict(os.environ, {VIEW_MODE_VARIABLE: "static"}):
                     where = {"metadata": {"path": str(NOTEBOOKS)}}
                     NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
             body, _ = exporter.from_notebook_node(notebook)
@@ -68,21 +69,6 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         shutil.rmtree(work, ignore_errors=True)
         raise
     return out_dir / "index.html"
-
-
-@contextlib.contextmanager
-def _static_views():
-    """Kernels started inside draw their 3-D views as pictures: an
-    interactive view needs a live kernel, which a page on disk has not."""
-    before = os.environ.get(VIEW_MODE_VARIABLE)
-    os.environ[VIEW_MODE_VARIABLE] = "static"
-    try:
-        yield
-    finally:
-        if before is None:
-            del os.environ[VIEW_MODE_VARIABLE]
-        else:
-            os.environ[VIEW_MODE_VARIABLE] = before
 
 
 def _copy_mathjax(target: Path) -> None:

@@ -8,6 +8,7 @@ import io
 import re
 import shutil
 import subprocess
+import tempfile
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -69,7 +70,7 @@ def _colourful_share(path: Path) -> float:
 def _chromium(page: Path, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
     """Headless Chromium on ``page``, with no network and a fresh profile;
     ``--virtual-time-budget`` lets the page's scripts (MathJax) finish first."""
-    profile = tmp_path / f"profile-{page.stem}-{len(list(tmp_path.iterdir()))}"
+    profile = tempfile.mkdtemp(prefix="chromium-profile-", dir=tmp_path)
     try:
         return subprocess.run(
             [
