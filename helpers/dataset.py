@@ -91,6 +91,7 @@ def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | No
         xyz = _with_altitude(fitted_loop(field), sensor)
 
     check_coverage(field, xyz)
+    sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
     bar = progress_bar(len(poses), "casting scans") if progress else None
     try:

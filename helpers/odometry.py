@@ -120,6 +120,7 @@ def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.n
             config.max_distance,
             config.max_num_trials,
             config.seed,
+            config.confidence,
         )
     except SlamError as exc:
         T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"

@@ -5,8 +5,10 @@ from __future__ import annotations
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from contextlib import contextmanager
 from pathlib import Path
+from typing import BinaryIO
 
 from .errors import SlamError
 
@@ -33,6 +35,8 @@ def atomic_dir(out_dir: str | Path, marker: str):
     out_dir = Path(out_dir)
     if out_dir.exists() and not out_dir.is_dir():
         raise SlamError(f"output path {out_dir} exists and is not a folder")
+    if Path.cwd().is_relative_to(out_dir.resolve()):
+        raise SlamError(f"output folder {out_dir} holds the current folder: choose another")
     if out_dir.is_dir() and any(out_dir.iterdir()) and not (out_dir / marker).is_file():
         raise SlamError(f"output folder {out_dir} is not empty and holds no earlier {marker}: choose another")
     out_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -48,4 +52,20 @@ def atomic_dir(out_dir: str | Path, marker: str):
             os.replace(work, out_dir)
     except BaseException:
         shutil.rmtree(work, ignore_errors=True)
+        raise
+
+
+def write_atomically(path: str | Path, write: Callable[[BinaryIO], object]) -> None:
+    """Write a file all or nothing: ``write(f)`` fills a temporary file of its
+    own beside ``path``, which then replaces ``path`` in one step. Readers see
+    the old file or the new one, never a part, even with several writers at
+    once; the temporary file is removed if ``write`` fails."""
+    path = Path(path)
+    fd, temporary = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            write(f)
+        os.replace(temporary, path)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
         raise

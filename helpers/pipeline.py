@@ -328,21 +328,23 @@ def write_run(result: SlamResult, config: Config, out_dir, map_error=None) -> Pa
 def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
     """The dataset and the SLAM result of the embedded default, computed
     once and then read from ``data/cache`` (keyed by the configuration and
-    the package's source, so any change recomputes). Notebooks 4 to 7 start
-    from here instead of from hidden state."""
+    the package's source, so any change recomputes; so does a damaged file).
+    Notebooks 4 to 7 start from here instead of from hidden state; two of them
+    computing it at once each write a whole file."""
     config = config or Config()
     here = Path(__file__).parent
     source = b"".join((here / f"{name}.py").read_bytes() for name in RUN_MODULES)
     key = hashlib.sha256(config_to_toml(config).encode() + source).hexdigest()[:16]
     cache = paths.cache_dir() / f"slam-{key}.pkl"
     dataset = create_dataset(sensor=config.sensor)
-    if cache.is_file():
+    try:
         with open(cache, "rb") as f:
             return dataset, pickle.load(f)
+    except FileNotFoundError:
+        pass
+    except Exception as exc:  # a damaged pickle raises many types: it is a miss
+        log.warning("cache %s is unreadable (%s): computing the run again", cache, exc)
     result = run_slam(dataset, config.slam)
     cache.parent.mkdir(parents=True, exist_ok=True)
-    partial = cache.with_suffix(".part")
-    with open(partial, "wb") as f:
-        pickle.dump(result, f)
-    partial.replace(cache)
+    paths.write_atomically(cache, lambda f: pickle.dump(result, f))
     return dataset, result

@@ -30,6 +30,7 @@ REFERENCE_NAMES = {
     "match_ratio": "matchRatio",
     "max_distance": "maxDistance",
     "max_num_trials": "maxNumTrails",
+    "confidence": "Confidence",
     "metric": "metric",
     "inlier_distance": "inlierDistance",
     "align_grid_step": "alignGridStep",
@@ -42,7 +43,7 @@ REFERENCE_NAMES = {
 # Which stage (and notebook) each parameter belongs to, in workflow order.
 STAGES = (
     ("Registration, notebook 3", ("skip_frames", "grid_step", "neighbors", "match_threshold", "match_ratio")),
-    ("", ("max_distance", "max_num_trials", "seed", "metric", "inlier_distance", "icp_grid_step")),
+    ("", ("max_distance", "max_num_trials", "confidence", "seed", "metric", "inlier_distance", "icp_grid_step")),
     ("", ("icp_fallback_rmse",)),
     ("Submaps, notebook 4", ("align_grid_step", "n_scans_per_submap")),
     ("Loop closure, notebook 5", ("loop_closure_search_radius", "sub_map_thresh", "loop_closure_threshold")),

@@ -18,9 +18,10 @@ from .features import check_points, to_cloud
 
 SAMPLE_SIZE = 3  # point pairs that fix a rigid motion
 MIN_INLIERS = 2 * SAMPLE_SIZE  # the best hypothesis must explain at least this many matches
-HYPOTHESES_PER_CHUNK = 256  # hypotheses scored at once (bounds memory: chunk x matches floats)
+HYPOTHESES_PER_CHUNK = 256  # hypotheses scored at once; also how often the trial count is revised
 DEGENERATE_SINE = 0.05  # a sample triangle whose angle at its first corner has a sine below this is skipped
-REFIT_ROUNDS = 2  # least-squares refits on the inliers after the best hypothesis is chosen
+LO_PER_CHUNK = 4  # a chunk's cheapest hypotheses that are locally optimised (when they beat the best so far)
+LO_MAX_ROUNDS = 20  # local optimisation: least-squares refits on the inliers until the inlier set stops changing
 ICP_MAX_ITERATIONS = 30  # ICP stops after this many iterations ...
 ICP_RELATIVE_CHANGE = 1e-6  # ... or when fitness and RMSE change by less than this fraction
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
@@ -49,16 +50,30 @@ def kabsch(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     return out
 
 
-def estimate_rigid_msac(moving_pts, fixed_pts, max_distance: float, max_trials: int, seed: int = 0):
-    """Robust rigid transform from matched points, by MSAC.
+def estimate_rigid_msac(
+    moving_pts, fixed_pts, max_distance: float, max_trials: int, seed: int = 0, confidence: float = 0.99
+):
+    """Robust rigid transform from matched points, by MSAC with local optimisation.
 
-    ``moving_pts[i]`` is matched to ``fixed_pts[i]`` (both (K, 3)). All
-    ``max_trials`` 3-pair samples are drawn at once from
-    ``numpy.random.default_rng(seed)``; each gives the motion that carries its
-    moving triangle onto the fixed one (thin triangles are skipped), and all
-    are scored together with the MSAC cost ``sum(min(r^2, max_distance^2))`` over all pairs. The
-    cheapest hypothesis wins (the first one on a tie) and is refitted by least
-    squares on its inliers (residual below ``max_distance``, in metres).
+    ``moving_pts[i]`` is matched to ``fixed_pts[i]`` (both (K, 3)). Samples of
+    3 pairs are drawn from ``numpy.random.default_rng(seed)``; each gives the
+    motion that carries its moving triangle onto the fixed one (thin triangles
+    are skipped), scored with the MSAC cost ``sum(min(r^2, max_distance^2))``
+    over all pairs, ``HYPOTHESES_PER_CHUNK`` at a time.
+
+    Whenever one of a chunk's ``LO_PER_CHUNK`` cheapest hypotheses beats the
+    best so far, it is *locally optimised* (LO-RANSAC, Chum et al. 2003):
+    refitted by least squares on its inliers (residual below
+    ``max_distance``, metres), again and again until the inlier set stops
+    changing. Hypotheses near the same motion end at the same inlier set, so
+    the answer hardly depends on which sample happened to win, and a
+    last-bit change of the input that swaps the winning sample moves it
+    little (``benchmarks/bench_stability.py`` measures how little).
+
+    The trial count follows the measured inlier ratio ``w`` of the best
+    optimised model: sampling stops once ``log(1 - confidence) / log(1 - w^3)``
+    samples were scored (MATLAB's ``Confidence``), and never goes past
+    ``max_trials``.
 
     Returns ``(T, inliers)``: the 4 x 4 transform and a (K,) boolean mask.
     The same input and seed give the same result on any number of threads.
@@ -71,30 +86,70 @@ def estimate_rigid_msac(moving_pts, fixed_pts, max_distance: float, max_trials: 
         raise SlamError(f"a rigid fit needs at least {SAMPLE_SIZE} matches, got {len(moving)}")
     if not (np.isfinite(max_distance) and max_distance > 0) or max_trials < 1:
         raise SlamError(f"max_distance must be positive and max_trials at least 1, got {max_distance}, {max_trials}")
+    if not 0 < confidence < 1:
+        raise SlamError(f"the robust fit's confidence must lie strictly between 0 and 1, got {confidence!r}")
 
     # Work about the centroids: smaller numbers, better rounding in the cost expansion.
     moving_centre, fixed_centre = moving.mean(axis=0), fixed.mean(axis=0)
     moving_c, fixed_c = moving - moving_centre, fixed - fixed_centre
     samples = _distinct_triples(np.random.default_rng(seed), len(moving), int(max_trials))
-    hypotheses, valid = _triangle_transforms(moving_c[samples], fixed_c[samples])
-    cost = _msac_costs(hypotheses, moving_c, fixed_c, max_distance)
-    cost[~valid] = np.inf
-    if not np.isfinite(cost).any():
+    best, best_cost, best_raw_cost, needed = None, np.inf, np.inf, int(max_trials)
+    for start in range(0, int(max_trials), HYPOTHESES_PER_CHUNK):
+        if start >= needed:
+            break
+        chunk = samples[start : start + HYPOTHESES_PER_CHUNK]
+        hypotheses, valid = _triangle_transforms(moving_c[chunk], fixed_c[chunk])
+        cost = _msac_costs(hypotheses, moving_c, fixed_c, max_distance)
+        cost[~valid] = np.inf
+        for winner in np.argsort(cost, kind="stable")[:LO_PER_CHUNK]:
+            if not cost[winner] < best_raw_cost:
+                break
+            model, model_cost, inliers = _locally_optimised(hypotheses[winner], moving_c, fixed_c, max_distance)
+            if model_cost < best_cost:
+                best, best_cost, best_inliers = model, model_cost, inliers
+                needed = _trials_needed(best_inliers.mean(), confidence, int(max_trials))
+        best_raw_cost = min(best_raw_cost, cost.min())
+    if best is None:
         raise SlamError(f"all {max_trials} samples of 3 matches were degenerate (collinear points)")
-    best = _uncentre(hypotheses[int(np.argmin(cost))], moving_centre, fixed_centre)
-    inliers = _squared_residuals(best[None], moving, fixed)[0] < max_distance**2
-    if inliers.sum() < MIN_INLIERS:
+    if best_inliers.sum() < MIN_INLIERS:
         raise SlamError(
             f"no rigid motion explains enough matches: the best of {max_trials} hypotheses has "
-            f"{inliers.sum()} inliers within {max_distance} m, at least {MIN_INLIERS} are needed"
+            f"{best_inliers.sum()} inliers within {max_distance} m, at least {MIN_INLIERS} are needed"
         )
-    for _ in range(REFIT_ROUNDS):
-        refit = kabsch(moving[inliers], fixed[inliers])
-        refit_inliers = _squared_residuals(refit[None], moving, fixed)[0] < max_distance**2
-        if refit_inliers.sum() < inliers.sum():
+    return _uncentre(best, moving_centre, fixed_centre), best_inliers
+
+
+def _locally_optimised(transform: np.ndarray, moving: np.ndarray, fixed: np.ndarray, max_distance: float):
+    """Refit ``transform`` on its inliers until the inlier set is stable.
+
+    Returns ``(T, cost, inliers)``; a refit is kept only while it lowers the
+    MSAC cost, so the result is never worse than the hypothesis it started from.
+    """
+    limit = max_distance**2
+    squared = _squared_residuals(transform[None], moving, fixed)[0]
+    cost, inliers = np.minimum(squared, limit).sum(), squared < limit
+    for _ in range(LO_MAX_ROUNDS):
+        if inliers.sum() < SAMPLE_SIZE:
             break
-        best, inliers = refit, refit_inliers
-    return best, inliers
+        refit = kabsch(moving[inliers], fixed[inliers])
+        squared = _squared_residuals(refit[None], moving, fixed)[0]
+        refit_cost, refit_inliers = np.minimum(squared, limit).sum(), squared < limit
+        if not refit_cost < cost:
+            break
+        transform, cost, changed, inliers = refit, refit_cost, refit_inliers != inliers, refit_inliers
+        if not changed.any():
+            break
+    return transform, cost, inliers
+
+
+def _trials_needed(inlier_ratio: float, confidence: float, max_trials: int) -> int:
+    """Samples of 3 needed to draw one all-inlier sample with ``confidence``, at most ``max_trials``."""
+    all_inliers = inlier_ratio**SAMPLE_SIZE
+    if all_inliers >= 1.0:
+        return 1
+    if all_inliers <= 0.0:
+        return max_trials
+    return int(min(max_trials, np.ceil(np.log(1.0 - confidence) / np.log1p(-all_inliers))))
 
 
 def _distinct_triples(rng: np.random.Generator, n: int, count: int) -> np.ndarray:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import open3d as o3d
 
-from .config import SensorConfig
+from .config import SensorConfig, angle_count
 from .errors import SlamError
 from .scene import HeightField
 
@@ -54,8 +54,7 @@ class Surface:
 
 
 def _angles(start: float, stop: float, step: float) -> np.ndarray:
-    count = int(np.floor((stop - start) / step + 1e-9)) + 1
-    return np.radians(start + step * np.arange(count))
+    return np.radians(start + step * np.arange(angle_count(start, stop, step)))
 
 
 def ray_pattern(sensor: SensorConfig) -> np.ndarray:
@@ -70,14 +69,16 @@ def ray_pattern(sensor: SensorConfig) -> np.ndarray:
 
 def poses_from_waypoints(waypoints: np.ndarray) -> np.ndarray:
     """Sensor poses (N, 4, 4) at the waypoints (N, 3), heading along the
-    direction of travel, level (no roll or pitch)."""
+    direction of travel, level (no roll or pitch). Where the drone does not
+    move (a repeated waypoint) it keeps the heading it had before (at the
+    start: the one it will take); a flight that never moves heads along +x."""
     waypoints = np.asarray(waypoints, dtype=np.float64)
     n = len(waypoints)
-    if n >= 2:
-        step = np.gradient(waypoints[:, :2], axis=0)
-        yaw = np.arctan2(step[:, 1], step[:, 0])
-    else:
-        yaw = np.zeros(n)
+    step = np.gradient(waypoints[:, :2], axis=0) if n >= 2 else np.zeros((n, 2))
+    moved = step.any(axis=1)
+    if moved.any():
+        step = step[np.maximum.accumulate(np.where(moved, np.arange(n), moved.argmax()))]
+    yaw = np.arctan2(step[:, 1], step[:, 0])
     poses = np.tile(np.eye(4), (n, 1, 1))
     c, s = np.cos(yaw), np.sin(yaw)
     poses[:, 0, 0], poses[:, 0, 1], poses[:, 1, 0], poses[:, 1, 1] = c, -s, s, c

@@ -10,7 +10,6 @@ import importlib.util
 import logging
 import os
 import shutil
-import tempfile
 from pathlib import Path
 from unittest import mock
 
@@ -24,6 +23,7 @@ TIMEOUT_S = 1800  # per notebook
 TEMPLATE = Path(__file__).parent / "templates" / "offline.html.j2"
 MATHJAX_DIR = "mathjax"  # the site's copy of MathJax 2.7, beside the pages
 MATHJAX_URL = f"{MATHJAX_DIR}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"  # the one full config it ships
+MARKER = ".helpers-site"  # the file that marks a folder as a site this tool wrote (and may replace)
 
 
 def notebook_paths() -> list[Path]:
@@ -39,15 +39,13 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
     from nbclient import NotebookClient
     from nbconvert import HTMLExporter
 
-    out_dir = Path(out_dir)
-    work = Path(tempfile.mkdtemp(prefix=".site.", dir=_parent(out_dir)))
     exporter = HTMLExporter(
         template_name="lab",
         template_file=str(TEMPLATE),
         mathjax_url=MATHJAX_URL,
     )
     pages = []
-    try:
+    with paths.atomic_dir(out_dir, MARKER) as work:
         for path in notebook_paths():
             notebook = nbformat.read(path, as_version=4)
             if execute:
@@ -62,13 +60,8 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
             pages.append((page, _title(notebook, path)))
         (work / "index.html").write_text(_index(pages), encoding="utf-8")
         _copy_mathjax(work / MATHJAX_DIR)
-        if out_dir.exists():
-            shutil.rmtree(out_dir)
-        work.replace(out_dir)
-    except BaseException:
-        shutil.rmtree(work, ignore_errors=True)
-        raise
-    return out_dir / "index.html"
+        (work / MARKER).write_text("Written by python -m helpers site: the next build replaces this folder.\n")
+    return Path(out_dir) / "index.html"
 
 
 def _copy_mathjax(target: Path) -> None:
@@ -78,11 +71,6 @@ def _copy_mathjax(target: Path) -> None:
         raise SlamError("the site needs MathJax: pip install jupyter-server-mathjax (see environment.txt)")
     source = Path(spec.submodule_search_locations[0]) / "static"
     shutil.copytree(source, target, ignore=shutil.ignore_patterns("localization"))
-
-
-def _parent(out_dir: Path) -> Path:
-    out_dir.parent.mkdir(parents=True, exist_ok=True)
-    return out_dir.parent
 
 
 def _title(notebook, path: Path) -> str:

@@ -15,6 +15,8 @@ import numpy as np
 from .errors import SlamError
 
 DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
+MAX_WAYPOINTS = 1_000_000  # one scan each: 1450 times the default flight
+MAT_KINDS = {"U": "text", "S": "text", "O": "a cell array or sparse matrix", "V": "a struct", "c": "complex numbers"}
 
 
 def loop_waypoints(
@@ -61,8 +63,11 @@ def read_waypoints(path: str | Path) -> np.ndarray:
         points = _read_csv(path)
     else:
         raise SlamError(f"waypoints must be a .mat or .csv file, got {path.name}")
-    if points.ndim != 2 or points.shape[1] not in (2, 3) or len(points) == 0:
+    if points.size == 0:
+        raise SlamError(f"{path.name} holds no waypoints")
+    if points.ndim != 2 or points.shape[1] not in (2, 3):
         raise SlamError(f"{path.name}: expected an N x 2 or N x 3 array of waypoints, got shape {points.shape}")
+    _check_count(path, len(points))
     if not np.isfinite(points).all():
         raise SlamError(f"{path.name}: waypoints contain NaN or infinite values")
     return points
@@ -91,13 +96,20 @@ def _read_mat(path: Path) -> np.ndarray:
     if "gTruthTraj" not in data:
         names = sorted(k for k in data if not k.startswith("__"))
         raise SlamError(f"{path.name} has no variable gTruthTraj (it holds {names})")
-    return np.asarray(data["gTruthTraj"], dtype=np.float64)
+    points = np.asarray(data["gTruthTraj"])
+    if points.dtype.kind not in "biuf":
+        kind = MAT_KINDS.get(points.dtype.kind, f"{points.dtype} values")
+        raise SlamError(f"{path.name}: gTruthTraj must be a matrix of real numbers, it holds {kind}")
+    return points.astype(np.float64)
 
 
 def _read_csv(path: Path) -> np.ndarray:
     lines = [line.strip() for line in path.read_text(errors="replace").splitlines() if line.strip()]
     if lines and not _is_number(lines[0].split(",")[0]):
         lines = lines[1:]  # a header such as "x,y,z"
+    if not lines:
+        return np.empty((0, 2))
+    _check_count(path, len(lines))
     try:
         rows = [[float(v) for v in line.split(",")] for line in lines]
     except ValueError:
@@ -105,6 +117,11 @@ def _read_csv(path: Path) -> np.ndarray:
     if len({len(r) for r in rows}) > 1:
         raise SlamError(f"{path.name}: lines have different numbers of columns")
     return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+
+
+def _check_count(path: Path, n: int) -> None:
+    if n > MAX_WAYPOINTS:
+        raise SlamError(f"{path.name} holds {n:,} waypoints; the limit is {MAX_WAYPOINTS:,} (one scan each)")
 
 
 def _is_number(text: str) -> bool:

@@ -1,5 +1,12 @@
 """Shared fixtures: the default dataset (built once per test session) and
-the real aerial tile kept beside the repository."""
+the real aerial tile kept beside the repository.
+
+The suite must pass on lidar noise other than the one the notebooks were
+committed with: ``HELPERS_NOISE_SEED=N pytest`` changes the default scene's
+noise seed for the tests and for the notebooks' kernels alike (they inherit
+the environment), and the header of the run says which seed and how many
+threads it used.
+"""
 
 import os
 import subprocess
@@ -10,6 +17,7 @@ import pytest
 
 import helpers
 from helpers import paths
+from helpers.config import NOISE_SEED_VARIABLE, default_noise_seed
 from helpers.display import VIEW_MODE_VARIABLE
 
 # nbval compares the notebooks with their committed outputs, which are still
@@ -18,6 +26,11 @@ from helpers.display import VIEW_MODE_VARIABLE
 os.environ[VIEW_MODE_VARIABLE] = "static"
 
 AUTZEN = paths.shared_data("autzen_trim.laz")
+
+
+def pytest_report_header(config):
+    threads = os.environ.get("OMP_NUM_THREADS", f"all {os.cpu_count()}")
+    return f"lidar noise seed: {default_noise_seed()} (${NOISE_SEED_VARIABLE}); OpenMP threads: {threads}"
 
 
 @pytest.fixture(scope="session")

@@ -43,7 +43,7 @@ def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path):
         ("[sensor]\nazimuth = [13, -13, 0.08]\n", "azimuth must be [start, stop, step]"),
         ("[sensor]\nmax_range = 'far'\n", "max_range must be a number"),
         ("[slam]\nmetric = 'planeToPlane'\n", "metric must be one of point-to-point"),
-        ("[slam]\nneighbors = 2\n", "neighbors must be an integer of at least 3"),
+        ("[slam]\nneighbors = 2\n", "neighbors must be an integer from 3 to 1,000"),
         ("[sensor\n", "not valid TOML"),
     ],
 )

@@ -2,6 +2,8 @@
 where it cannot close a loop or cannot register at all."""
 
 import json
+import subprocess
+import sys
 from types import SimpleNamespace
 
 import laspy
@@ -9,7 +11,7 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import Config, SlamConfig
+from helpers.config import Config, SlamConfig, config_to_toml
 from helpers.pipeline import Edge, build_pose_graph, run_slam, write_run
 from helpers.trajectory import read_tum
 from helpers.waypoints import loop_waypoints
@@ -18,11 +20,16 @@ SHORT = SlamConfig(sub_map_thresh=3)  # a short loop has few submaps
 
 
 @pytest.fixture(scope="module")
-def short_loop(tmp_path_factory):
-    """A 200 m loop flown once and 30 m past its start (115 scans)."""
+def short_loop_csv(tmp_path_factory):
+    """The waypoints of a 200 m loop flown once and 30 m past its start (115 scans)."""
     path = tmp_path_factory.mktemp("loop") / "loop.csv"
     np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
-    return helpers.create_dataset(waypoints_path=path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def short_loop(short_loop_csv):
+    return helpers.create_dataset(waypoints_path=short_loop_csv)
 
 
 @pytest.fixture(scope="module")
@@ -57,6 +64,32 @@ def test_same_inputs_same_numbers(short_loop, short_run):
     assert again.keys() == first.keys()
     for key, value in first.items():
         assert again[key] == (value if isinstance(value, int) else pytest.approx(value, rel=1e-9, abs=1e-12)), key
+
+
+# Two runs of the command on one machine: counts equal, real numbers within
+# these bounds (Open3D sums in parallel, so the last bits may differ).
+REPEAT_REL, REPEAT_ABS = 1e-9, 1e-12
+
+
+def test_two_runs_write_the_same_metrics(short_loop_csv, tmp_path):
+    """``python -m helpers run`` twice, in fresh processes: the same metrics.json, runtimes aside."""
+    config = tmp_path / "config.toml"
+    config.write_text(config_to_toml(Config(slam=SHORT)))
+    runs = []
+    for name in ("first", "second"):
+        command = [sys.executable, "-m", "helpers", "run", "--waypoints", str(short_loop_csv)]
+        subprocess.run([*command, "--config", str(config), "--out", str(tmp_path / name)], check=True)
+        metrics = json.loads((tmp_path / name / "metrics.json").read_text())
+        metrics.pop("runtime_s")
+        runs.append(metrics)
+    first, second = runs
+    assert first["n_loop_closures"] >= 1  # the run did close the loop: there is something to repeat
+    assert first.keys() == second.keys()
+    for key, value in first.items():
+        if isinstance(value, float):
+            assert second[key] == pytest.approx(value, rel=REPEAT_REL, abs=REPEAT_ABS), key
+        else:
+            assert second[key] == value, key
 
 
 def test_written_outputs(short_run, tmp_path):

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.registration import estimate_rigid_msac, icp_cloud, icp_rmse, kabsch, refine_icp
+from helpers.registration import _trials_needed, estimate_rigid_msac, icp_cloud, icp_rmse, kabsch, refine_icp
 
 WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
 
@@ -72,6 +72,44 @@ def test_msac_same_seed_same_answer_different_seed_still_right():
     np.testing.assert_array_equal(mask, mask_again)
     other, _ = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=8)
     assert _displacement(other, truth, moving) < 0.05
+
+
+def test_msac_answer_is_the_least_squares_fit_of_its_inliers_whatever_the_seed():
+    """Local optimisation ends at a fixed point: the least-squares motion of
+    the inliers it keeps. Every seed finds the same inlier set here, so every
+    seed gives the same transform, to rounding; so does shuffling the matches."""
+    moving, fixed, _, outliers = _matches_with_outliers(seed=5)
+    answers = []
+    for seed in range(6):
+        T, inliers = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=seed)
+        np.testing.assert_array_equal(inliers, ~outliers)
+        np.testing.assert_allclose(T, kabsch(moving[inliers], fixed[inliers]), atol=1e-9)
+        answers.append(T)
+    order = np.random.default_rng(0).permutation(len(moving))
+    shuffled, _ = estimate_rigid_msac(moving[order], fixed[order], 1.0, 3000, seed=0)
+    np.testing.assert_allclose(np.array(answers), np.broadcast_to(shuffled, (6, 4, 4)), atol=1e-9)
+
+
+@pytest.mark.parametrize(
+    ("inlier_ratio", "confidence", "expected"),
+    [(0.5, 0.99, 35), (0.1, 0.99, 3000), (0.3, 0.99, 169), (0.3, 0.9, 85), (1.0, 0.99, 1), (0.0, 0.99, 3000)],
+)
+def test_trial_count_follows_the_inlier_ratio(inlier_ratio, confidence, expected):
+    """log(1 - p) / log(1 - w^3), rounded up and capped at the 3000 trials allowed:
+    w = 0.5 needs ceil(ln 0.01 / ln 0.875) = 35 samples for 99 %."""
+    assert _trials_needed(inlier_ratio, confidence, 3000) == expected
+
+
+def test_msac_with_many_inliers_stops_early_with_the_same_answer():
+    """Half the matches are inliers: 35 samples suffice for 99 %, so a cap of
+    3000 and a cap of 256 (one chunk) draw the same first chunk and stop there."""
+    moving, fixed, truth, _ = _matches_with_outliers(seed=9, outlier_fraction=0.5)
+    capped, _ = estimate_rigid_msac(moving, fixed, 1.0, 256, seed=0)
+    full, _ = estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=0)
+    np.testing.assert_array_equal(full, capped)
+    assert _displacement(full, truth, moving) < 0.05
+    with pytest.raises(SlamError, match="confidence"):
+        estimate_rigid_msac(moving, fixed, 1.0, 3000, seed=0, confidence=1.0)
 
 
 def test_msac_bit_identical_across_thread_counts(thread_outputs):

@@ -9,6 +9,7 @@ import re
 import shutil
 import subprocess
 import tempfile
+from contextlib import redirect_stderr
 from html.parser import HTMLParser
 from pathlib import Path
 
@@ -16,6 +17,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from helpers import site as site_module
+from helpers.__main__ import main
 from helpers.site import build_site, notebook_paths
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -165,3 +168,63 @@ def test_the_formulas_are_typeset_offline(site, tmp_path, browser):
     assert "$$" in source, "the pose-graph page has no display formula to typeset"
     typeset = dom.count('class="MathJax"')  # a typeset formula (HTML-CSS output)
     assert typeset >= 10, f"MathJax typeset {typeset} formulas on {page.name}"
+
+
+# The output folder: replaced only when it is empty or an earlier site (checked on a one-page site, not executed).
+
+
+@pytest.fixture()
+def one_notebook(tmp_path, monkeypatch):
+    """The site's notebooks are one small notebook in a folder of its own."""
+    import nbformat.v4
+
+    folder = tmp_path / "notebooks"
+    folder.mkdir()
+    notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# A page\n\nSome text.")])
+    nbformat.write(notebook, folder / "01_page.ipynb")
+    monkeypatch.setattr(site_module, "NOTEBOOKS", folder)
+
+
+def _site(out) -> tuple[int, str]:
+    """``python -m helpers site --out OUT --no-execute`` in this process: (exit code, stderr)."""
+    with redirect_stderr(io.StringIO()) as err:
+        code = main(["site", "--out", str(out), "--no-execute"])
+    return code, err.getvalue()
+
+
+def test_the_site_refuses_a_folder_that_holds_a_users_files(tmp_path, one_notebook):
+    out = tmp_path / "home" / "Documents"
+    out.mkdir(parents=True)
+    (out / "thesis.txt").write_text("three years of work")
+    code, err = _site(out)
+    assert code == 2
+    assert err.strip().splitlines() == [
+        f"error: output folder {out} is not empty and holds no earlier {site_module.MARKER}: choose another"
+    ]
+    assert [p.name for p in out.iterdir()] == ["thesis.txt"]
+    assert (out / "thesis.txt").read_text() == "three years of work"
+    assert [p.name for p in out.parent.iterdir()] == ["Documents"]  # no half-written site beside it
+
+
+def test_the_site_refuses_the_current_folder(tmp_path, one_notebook, monkeypatch):
+    here = tmp_path / "here"
+    here.mkdir()
+    monkeypatch.chdir(here)
+    (here / "notes.md").write_text("mine")
+    assert _site(".")[0] == 2 and (here / "notes.md").read_text() == "mine"
+    (here / "notes.md").unlink()
+    code, err = _site(".")  # even empty: replacing it would leave the shell in a deleted folder
+    assert code == 2 and "holds the current folder" in err
+    assert here.is_dir() and not any(here.iterdir())
+
+
+def test_the_site_fills_an_empty_folder_and_replaces_an_earlier_site(tmp_path, one_notebook):
+    out = tmp_path / "build" / "html"
+    out.mkdir(parents=True)
+    assert _site(out)[0] == 0
+    assert (out / "01_page.html").is_file() and (out / site_module.MARKER).is_file()
+    assert _parse(out / "index.html").links == ["01_page.html"]
+    (out / "stale.html").write_text("from an older build")
+    assert _site(out)[0] == 0
+    assert not (out / "stale.html").exists() and (out / "01_page.html").is_file()
+    assert [p.name for p in out.parent.iterdir()] == ["html"]  # no temporary folders left

@@ -1,0 +1,83 @@
+"""Do the tests bite? Break one step of the pipeline on purpose and check that the suite fails.
+
+Each mutant is a one-line change to a copy of the repository (the working
+tree is never touched). The suite, unit tests and notebooks alike, runs on
+the copy with ``pytest -x`` and must end with failed tests (exit code 1): a
+mutant that passes, or a run that fails for another reason (a collection or
+usage error), is reported and this script exits non-zero.
+
+    python tests/mutants.py            # every mutant
+    python tests/mutants.py identity   # the ones whose name contains "identity"
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+# name: (file, the line as it is, the line as the mutant has it)
+MUTANTS = {
+    "robust fit returns the identity": (
+        "helpers/registration.py",
+        "    return _uncentre(best, moving_centre, fixed_centre), best_inliers\n",
+        "    return np.eye(4), best_inliers\n",
+    ),
+    "loop closure disabled": (
+        "helpers/pipeline.py",
+        "        if len(submaps) > config.sub_map_thresh:\n",
+        "        if False:\n",
+    ),
+    "ICP returns its initial guess": (
+        "helpers/registration.py",
+        "    transform = np.array(result.transformation)\n",
+        "    transform = init.copy()\n",
+    ),
+}
+
+
+def mutated_copy(root: Path, file: str, line: str, mutant: str) -> Path:
+    """The tracked files of the repository copied under ``root``, with one line changed."""
+    copy = root / "repo"
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=REPO, capture_output=True, check=True).stdout
+    for name in tracked.decode().split("\0"):
+        if name and (REPO / name).is_file():
+            (copy / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(REPO / name, copy / name)
+    (root / "shared").symlink_to(REPO.parent / "shared")  # the real tile stays beside the repository
+    source = (copy / file).read_text()
+    if source.count(line) != 1:
+        raise SystemExit(f"error: the line to mutate in {file} was found {source.count(line)} times, not once")
+    (copy / file).write_text(source.replace(line, mutant))
+    return copy
+
+
+def suite_fails(copy: Path) -> tuple[bool, str]:
+    """Run the whole suite on ``copy`` until its first failure: (failed as a test should, last lines)."""
+    env = {**os.environ, "PYTHONPATH": str(copy), "HELPERS_CACHE": str(copy / "data" / "cache")}
+    command = [sys.executable, "-m", "pytest", "-x", "-q"]
+    done = subprocess.run(command, cwd=copy, env=env, capture_output=True, text=True)
+    tail = "\n".join(done.stdout.strip().splitlines()[-3:])
+    return done.returncode == 1, tail
+
+
+def main(argv: list[str]) -> int:
+    chosen = {name: m for name, m in MUTANTS.items() if not argv or any(a in name for a in argv)}
+    survivors = []
+    for name, (file, line, mutant) in chosen.items():
+        with tempfile.TemporaryDirectory(prefix="mutant-") as root:
+            failed, tail = suite_fails(mutated_copy(Path(root), file, line, mutant))
+        print(f"{'caught' if failed else 'SURVIVED'}: {name}\n    {tail.replace(chr(10), chr(10) + '    ')}")
+        if not failed:
+            survivors.append(name)
+    print(f"{len(chosen) - len(survivors)} of {len(chosen)} mutants caught")
+    return 1 if survivors else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
