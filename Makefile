@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 # Debian package : shared library it provides (checked with ldconfig)
 SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 
-.PHONY: run test lint notebooks html sysdeps browser setup clean
+.PHONY: run test robustness lint notebooks html sysdeps browser setup clean
 
 run: $(STAMP)
 	$(PY) -m helpers dataset --out build/dataset
@@ -21,6 +21,13 @@ test: $(STAMP) browser
 	$(VENV)/bin/ruff check helpers tests benchmarks
 	$(VENV)/bin/ruff format --check helpers tests benchmarks
 	$(VENV)/bin/pytest
+
+# The tests hold on any machine and still bite: the whole suite again on
+# other lidar noise and one thread, then one-line mutants of the pipeline
+# that the suite must catch (tests/mutants.py). CI runs it after make test.
+robustness: $(STAMP)
+	HELPERS_NOISE_SEED=1 OMP_NUM_THREADS=1 $(VENV)/bin/pytest
+	$(PY) tests/mutants.py
 
 setup: $(STAMP)
 

@@ -17,13 +17,7 @@ import pytest
 
 import helpers
 from helpers import paths
-from helpers.config import NOISE_SEED_VARIABLE, default_noise_seed
-from helpers.display import VIEW_MODE_VARIABLE
-
-# nbval compares the notebooks with their committed outputs, which are still
-# pictures: its kernels (started from this process) must draw 3-D views as
-# pictures too, whatever is installed.
-os.environ[VIEW_MODE_VARIABLE] = "static"
+from helpers.config import NOISE_SEED_VARIABLE, SensorConfig, default_noise_seed
 
 AUTZEN = paths.shared_data("autzen_trim.laz")
 
@@ -63,13 +57,15 @@ def private_cache(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="session")
 def flight_over(tmp_path_factory):
-    """Build the dataset of a stretch of the shipped loop: ``flight_over(rows)``."""
+    """Build the dataset of a stretch of the shipped loop: ``flight_over(rows)``,
+    optionally under another lidar noise seed than the default."""
 
-    def make(rows: slice):
+    def make(rows: slice, noise_seed: int | None = None):
         xy = helpers.read_waypoints(helpers.DEFAULT_WAYPOINTS)[rows]
         path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
         np.savetxt(path, xy, delimiter=",", header="x,y", comments="")
-        return helpers.create_dataset(waypoints_path=path)
+        sensor = SensorConfig() if noise_seed is None else SensorConfig(seed=noise_seed)
+        return helpers.create_dataset(waypoints_path=path, sensor=sensor)
 
     return make
 

@@ -1,10 +1,12 @@
 """Do the tests bite? Break one step of the pipeline on purpose and check that the suite fails.
 
 Each mutant is a one-line change to a copy of the repository (the working
-tree is never touched). The suite, unit tests and notebooks alike, runs on
-the copy with ``pytest -x`` and must end with failed tests (exit code 1): a
-mutant that passes, or a run that fails for another reason (a collection or
-usage error), is reported and this script exits non-zero.
+tree is never touched). The whole suite, unit tests and notebooks alike,
+runs on the copy with ``pytest -x`` and must end with failed tests (exit
+code 1): a mutant that passes, or a run that fails for another reason (a
+collection or usage error), is reported and this script exits non-zero. The
+test file expected to catch a mutant runs first, so a caught mutant costs
+seconds rather than the whole suite; the rest of the suite follows it.
 
     python tests/mutants.py            # every mutant
     python tests/mutants.py identity   # the ones whose name contains "identity"
@@ -21,19 +23,22 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 
-# name: (file, the line as it is, the line as the mutant has it)
+# name: (test file run first, file mutated, the line as it is, the line as the mutant has it)
 MUTANTS = {
     "robust fit returns the identity": (
+        "tests/test_registration.py",
         "helpers/registration.py",
         "    return _uncentre(best, moving_centre, fixed_centre), best_inliers\n",
         "    return np.eye(4), best_inliers\n",
     ),
     "loop closure disabled": (
+        "tests/test_pipeline.py",
         "helpers/pipeline.py",
         "        if len(submaps) > config.sub_map_thresh:\n",
         "        if False:\n",
     ),
     "ICP returns its initial guess": (
+        "tests/test_registration.py",
         "helpers/registration.py",
         "    transform = np.array(result.transformation)\n",
         "    transform = init.copy()\n",
@@ -57,10 +62,11 @@ def mutated_copy(root: Path, file: str, line: str, mutant: str) -> Path:
     return copy
 
 
-def suite_fails(copy: Path) -> tuple[bool, str]:
-    """Run the whole suite on ``copy`` until its first failure: (failed as a test should, last lines)."""
+def suite_fails(copy: Path, first: str) -> tuple[bool, str]:
+    """Run the whole suite on ``copy``, ``first`` first, until its first failure:
+    (failed as a test should, its last lines)."""
     env = {**os.environ, "PYTHONPATH": str(copy), "HELPERS_CACHE": str(copy / "data" / "cache")}
-    command = [sys.executable, "-m", "pytest", "-x", "-q"]
+    command = [sys.executable, "-m", "pytest", "-x", "-q", first, "tests", "notebooks"]
     done = subprocess.run(command, cwd=copy, env=env, capture_output=True, text=True)
     tail = "\n".join(done.stdout.strip().splitlines()[-3:])
     return done.returncode == 1, tail
@@ -69,9 +75,9 @@ def suite_fails(copy: Path) -> tuple[bool, str]:
 def main(argv: list[str]) -> int:
     chosen = {name: m for name, m in MUTANTS.items() if not argv or any(a in name for a in argv)}
     survivors = []
-    for name, (file, line, mutant) in chosen.items():
+    for name, (first, file, line, mutant) in chosen.items():
         with tempfile.TemporaryDirectory(prefix="mutant-") as root:
-            failed, tail = suite_fails(mutated_copy(Path(root), file, line, mutant))
+            failed, tail = suite_fails(mutated_copy(Path(root), file, line, mutant), first)
         print(f"{'caught' if failed else 'SURVIVED'}: {name}\n    {tail.replace(chr(10), chr(10) + '    ')}")
         if not failed:
             survivors.append(name)

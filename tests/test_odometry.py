@@ -32,6 +32,28 @@ def test_odometry_meets_the_relative_error_bar(flight, odometry):
     assert odometry.fallbacks == []
 
 
+STEP_BOUND_M = 0.3  # no step of the whole default flight is further off (benchmarks/bench_stability.py: 0.27 m)
+NUDGE_BOUND_M = 0.05  # nor moved further by the nudge (the whole flight: at most 3.3 cm)
+
+
+@pytest.mark.parametrize("noise_seed", [0, 1, 2])
+def test_every_step_stays_within_bounds_whatever_the_noise(flight_over, noise_seed):
+    """The same stretch under three lidar noises: every step within the same
+    bound of the true motion and none falling back; and nudging every point
+    by up to a micrometre (far more than the last-bit differences between
+    CPUs) moves no step by more than a few centimetres."""
+    data = flight_over(WAYPOINT_ROWS, noise_seed=noise_seed)
+    config = SlamConfig()
+    result = run_odometry(data, config=config)
+    truth = np.linalg.inv(data.poses[result.indices[:-1]]) @ data.poses[result.indices[1:]]
+    error = np.linalg.norm(result.relative[:, :3, 3] - truth[:, :3, 3], axis=1)
+    assert result.fallbacks == [] and error.max() < STEP_BOUND_M, error.max()
+    rng = np.random.default_rng(noise_seed)
+    nudged = run_odometry([s + rng.uniform(-1e-6, 1e-6, s.shape) for s in data.scans], data.poses[0], config)
+    moved = np.linalg.norm(nudged.relative[:, :3, 3] - result.relative[:, :3, 3], axis=1)
+    assert nudged.fallbacks == [] and moved.max() < NUDGE_BOUND_M, moved.max()
+
+
 def test_odometry_result_is_complete(odometry):
     k = len(odometry.indices)
     assert odometry.poses.shape == (k, 4, 4) and odometry.relative.shape == (k - 1, 4, 4)
