@@ -5,17 +5,16 @@ Stage 1, the dataset::
     from helpers import create_dataset
     data = create_dataset()            # the embedded default scene and loop
     data.scans[0], data.poses[0]       # a scan (sensor frame) and its pose
+
+Importing the package sets nothing (no environment variable, no matplotlib
+back end); pictures live in :mod:`helpers.viz`, the site in :mod:`helpers.site`.
 """
 
-from . import display as _display
-
-_display.select_offscreen_backend()  # before anything imports VTK
-
-from .config import Config, SensorConfig, load_config  # noqa: E402
-from .dataset import DEFAULT_WAYPOINTS, Dataset, create_dataset, write_dataset  # noqa: E402
-from .errors import SlamError  # noqa: E402
-from .scene import default_scene  # noqa: E402
-from .waypoints import read_waypoints  # noqa: E402
+from .config import Config, SensorConfig, load_config
+from .dataset import DEFAULT_WAYPOINTS, Dataset, create_dataset, write_dataset
+from .errors import SlamError
+from .scene import default_scene
+from .waypoints import read_waypoints
 
 __all__ = [
     "DEFAULT_WAYPOINTS",

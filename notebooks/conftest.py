@@ -1,10 +1,10 @@
 """nbval compares the notebooks with their committed outputs, whose 3-D views
 are still pictures: the kernels it starts from this process must draw them
 as pictures too, whatever is installed (``pytest notebooks/NN.ipynb`` alone
-included)."""
+included), and Open3D must not announce its web visualiser in them."""
 
 import os
 
-from helpers.display import VIEW_MODE_VARIABLE
+from helpers.viz.display import KERNEL_ENVIRONMENT
 
-os.environ[VIEW_MODE_VARIABLE] = "static"
+os.environ.update(KERNEL_ENVIRONMENT)

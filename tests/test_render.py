@@ -11,11 +11,12 @@ import pytest
 from IPython.display import Image
 from nbclient import NotebookClient
 
-from helpers import SlamError, render
-from helpers.display import VIEW_MODE_VARIABLE, interactive_views, view_mode
+from helpers import SlamError
+from helpers.viz import render
+from helpers.viz.display import VIEW_MODE_VARIABLE, interactive_views, view_mode
 
 WIDGET = "application/vnd.jupyter.widget-view+json"
-IMPORTS = "import os\nimport numpy as np\nfrom helpers import render"
+IMPORTS = "import os\nimport numpy as np\nfrom helpers.viz import render"
 CLOUD = "np.random.default_rng(0).random((400, 3)) * [100, 80, 10]"
 
 

@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from helpers import site as site_module
 from helpers.__main__ import main
+from helpers.site import build as site_module
 from helpers.site import build_site, notebook_paths
 
 CHROMIUM = Path("/usr/bin/chromium")

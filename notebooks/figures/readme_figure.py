@@ -8,7 +8,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
-from helpers import figures
+from helpers.viz import figures
 from helpers.pipeline import default_run
 
 _, result = default_run()

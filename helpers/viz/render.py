@@ -5,7 +5,7 @@ Every function returns something a notebook displays as a still image (PNG
 or JPEG bytes inside ``IPython.display.Image``) or an HTML animation, so the
 pictures survive a static HTML export and need no running kernel. The one
 exception is :func:`explore`, which in a live JupyterLab kernel with trame
-returns an interactive view instead (decided by :mod:`helpers.display`).
+returns an interactive view instead (decided by :mod:`helpers.viz.display`).
 """
 
 from __future__ import annotations
@@ -14,26 +14,13 @@ import io
 import re
 
 import matplotlib
-
-matplotlib.use("Agg")  # no display anywhere; notebooks still show figures inline
-
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .scene import CLASS_NAMES
+from ..scene import CLASS_NAMES
+from .display import interactive_views, use_offscreen_vtk
+from .style import CLASS_COLORS, COLORS, HEIGHT_CMAP, WINDOW
 
-# One colour per thing, in all seven notebooks.
-COLORS = {
-    "ground_truth": "#2ca02c",  # green
-    "odometry": "#d62728",  # red
-    "optimized": "#1f77b4",  # blue
-    "loop": "#ff7f0e",  # orange
-    "waypoints": "#e41a1c",
-    "moving": "#e377c2",  # the scan being registered
-    "fixed": "#17becf",  # the scan it is registered to
-}
-CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
-HEIGHT_CMAP = "gist_earth"
 # Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
 # blank offline; these characters need no font download.
 PLAYER_ICONS = {
@@ -47,12 +34,18 @@ PLAYER_ICONS = {
     "fa-fast-forward": "\u21e5",  # last frame
     "fa-plus": "+",  # faster
 }
-WINDOW = (900, 600)
+
+
+def pyvista():
+    """PyVista, imported after :func:`helpers.viz.display.use_offscreen_vtk`."""
+    use_offscreen_vtk()
+    import pyvista as pv
+
+    return pv
 
 
 def _plotter(window=WINDOW):
-    import pyvista as pv
-
+    pv = pyvista()
     plotter = pv.Plotter(off_screen=True, window_size=list(window))
     plotter.set_background("white")
     return plotter
@@ -105,13 +98,11 @@ def cloud_view(points: np.ndarray, window=WINDOW, **view) -> np.ndarray:
 
 def explore(points: np.ndarray, window=WINDOW, **view):
     """The view of :func:`cloud_view`, to turn, zoom and pan in JupyterLab
-    when :func:`helpers.display.interactive_views` allows it; otherwise the
+    when :func:`helpers.viz.display.interactive_views` allows it; otherwise the
     same view as a still image."""
-    from .display import interactive_views
-
     if not interactive_views():
         return show(cloud_view(points, window, **view))
-    import pyvista as pv
+    pv = pyvista()
 
     plotter = pv.Plotter(notebook=True, window_size=list(window))
     plotter.set_background("white")
@@ -143,7 +134,7 @@ def draw_cloud(
     clouds. ``path_height`` draws the path at that height instead of its own
     (a drone at 700 m would sit far above a map at 100 m).
     """
-    import pyvista as pv
+    pv = pyvista()
 
     cloud = pv.PolyData(np.asarray(points, np.float32))
     cloud["value"] = points[:, 2] if scalars is None else scalars

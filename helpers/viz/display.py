@@ -1,13 +1,19 @@
 """The one place that decides how 3-D views are drawn.
 
 No machine of this project has a display, so VTK renders off-screen with
-OSMesa (Debian's ``libosmesa6``), chosen before VTK is first imported; that
-also keeps VTK from writing "bad X server connection" into notebook outputs.
-Set ``VTK_DEFAULT_OPENGL_WINDOW`` yourself (e.g. ``vtkEGLRenderWindow``) to
-choose another back end. Open3D's web visualiser (which needs a browser
-connection and prints a banner in every notebook) is switched off too.
+OSMesa (Debian's ``libosmesa6``): :func:`use_offscreen_vtk` chooses it just
+before :mod:`helpers.viz.render` first imports PyVista (importing ``helpers``
+or ``helpers.viz`` sets nothing); that also keeps VTK from writing "bad X
+server connection" into notebook outputs. Set ``VTK_DEFAULT_OPENGL_WINDOW``
+yourself (e.g. ``vtkEGLRenderWindow``) to choose another back end.
 
-The big 3-D views of the notebooks (:func:`helpers.render.explore`) are
+A notebook kernel should start with :data:`KERNEL_ENVIRONMENT` (the site
+builder and nbval start theirs so): Open3D's web visualiser, which needs a
+browser connection and prints a banner in every notebook, is switched off
+when Open3D is imported, which importing ``helpers.dataset`` does. In
+JupyterLab, start it so: ``OPEN3D_DISABLE_WEB_VISUALIZER=true jupyter lab``.
+
+The big 3-D views of the notebooks (:func:`helpers.viz.render.explore`) are
 interactive when a person can use them: in a Jupyter kernel with PyVista's
 trame back end installed (``trame-pyvista``, in ``environment.txt``), you can
 turn, zoom and pan them in JupyterLab. Everywhere else, and whenever
@@ -24,17 +30,18 @@ VIEW_MODE_VARIABLE = "HELPERS_3D"
 VIEW_MODES = ("auto", "static")
 
 
-def select_offscreen_backend() -> None:
+KERNEL_ENVIRONMENT = {"OPEN3D_DISABLE_WEB_VISUALIZER": "true", VIEW_MODE_VARIABLE: "static"}
+
+
+def use_offscreen_vtk() -> None:
+    """Render VTK off-screen with OSMesa unless ``VTK_DEFAULT_OPENGL_WINDOW``
+    says otherwise; called before PyVista is first imported."""
     os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkOSOpenGLRenderWindow")
-    os.environ.setdefault("OPEN3D_DISABLE_WEB_VISUALIZER", "true")
-    # Open3D's OpenMP threads otherwise spin after each call and starve
-    # numpy's (measured: 1.2 s instead of 0.35 s per registered scan).
-    os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 
 def view_mode() -> str:
     """``HELPERS_3D``: ``auto`` (the default) or ``static``."""
-    from .errors import SlamError
+    from ..errors import SlamError
 
     mode = os.environ.get(VIEW_MODE_VARIABLE, "auto").strip().lower() or "auto"
     if mode not in VIEW_MODES:
@@ -43,7 +50,7 @@ def view_mode() -> str:
 
 
 def interactive_views() -> bool:
-    """Whether :func:`helpers.render.explore` draws an interactive view: not
+    """Whether :func:`helpers.viz.render.explore` draws an interactive view: not
     when ``HELPERS_3D=static``; otherwise when this runs in a Jupyter kernel
     and PyVista's trame back end is installed."""
     if view_mode() == "static":

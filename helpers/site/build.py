@@ -13,9 +13,9 @@ import shutil
 from pathlib import Path
 from unittest import mock
 
-from . import paths
-from .display import VIEW_MODE_VARIABLE
-from .errors import SlamError
+from .. import paths
+from ..errors import SlamError
+from ..viz.display import KERNEL_ENVIRONMENT
 
 log = logging.getLogger(__name__)
 NOTEBOOKS = paths.REPO / "notebooks"
@@ -51,7 +51,7 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
             if execute:
                 log.info("executing %s", path.name)
                 # Its kernel draws 3-D views as pictures: a page on disk has no kernel to talk to.
-                with mock.patch.dict(os.environ, {VIEW_MODE_VARIABLE: "static"}):
+                with mock.patch.dict(os.environ, KERNEL_ENVIRONMENT):
                     where = {"metadata": {"path": str(NOTEBOOKS)}}
                     NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
             body, _ = exporter.from_notebook_node(notebook)

@@ -1,0 +1,164 @@
+"""Figures for notebook 6: the pose graph, robust kernels and the optimised trajectories."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
+
+from .style import COLORS, grid, segments, xy_of
+
+
+def pose_graph_figure(poses, loop_pairs, every: int = 1, inset=None, inset_at=(0.42, 0.2, 0.42, 0.6)):
+    """The pose graph drawn on its initial (odometry) poses: nodes as dots,
+    odometry edges as a red line, loop edges in orange. ``inset`` =
+    (xmin, xmax, ymin, ymax) adds a zoom on that window, drawn at ``inset_at``
+    (x0, y0, width, height in axes fractions)."""
+    xy = xy_of(poses)
+    pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
+    fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
+
+    def draw(axis, size):
+        axis.plot(xy[:, 0], xy[:, 1], color=COLORS["odometry"], lw=1.2, zorder=2)
+        axis.scatter(xy[::every, 0], xy[::every, 1], s=size, color="black", zorder=3)
+        axis.add_collection(
+            LineCollection(segments(xy[pairs[:, 0]], xy[pairs[:, 1]]), colors=COLORS["loop"], linewidths=2.2, zorder=4)
+        )
+
+    draw(ax, 6)
+    ax.plot([], [], color=COLORS["odometry"], lw=1.2, label=f"odometry edges ({len(xy) - 1})")
+    ax.scatter([], [], s=6, color="black", label=f"nodes ({len(xy)})")
+    ax.plot([], [], color=COLORS["loop"], lw=2.2, label=f"loop edges ({len(pairs)})")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="the pose graph on the odometry poses")
+    grid(ax)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
+    if inset is not None:
+        zoom = ax.inset_axes(list(inset_at))
+        draw(zoom, 14)
+        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
+        ax.indicate_inset_zoom(zoom, edgecolor="black")
+    return fig
+
+
+def kernels_figure(scales: dict, limit: float = 10.0):
+    """The cost rho(r) and the weight w(r) = rho'(r) / r of each robust kernel
+    as functions of the whitened residual r (in sigmas)."""
+    r = np.linspace(0, limit, 400)
+    costs = {"none (least squares)": (r**2 / 2, np.ones_like(r))}
+    if "huber" in scales:
+        k = scales["huber"]
+        small = np.abs(r) <= k
+        costs[f"Huber, k = {k:g}"] = (
+            np.where(small, r**2 / 2, k * np.abs(r) - k**2 / 2),
+            np.where(small, 1.0, k / np.maximum(np.abs(r), 1e-12)),
+        )
+    if "cauchy" in scales:
+        c = scales["cauchy"]
+        costs[f"Cauchy, c = {c:g}"] = (c**2 / 2 * np.log1p((r / c) ** 2), 1 / (1 + (r / c) ** 2))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    for (name, (rho, weight)), color in zip(costs.items(), ("black", "#6a3d9a", COLORS["loop"]), strict=False):
+        left.plot(r, rho, color=color, lw=2, label=name)
+        right.plot(r, weight, color=color, lw=2, label=name)
+    left.set(xlabel="whitened residual r (sigmas)", ylabel="cost rho(r)", ylim=(0, limit**2 / 4), title="cost")
+    right.set(xlabel="whitened residual r (sigmas)", ylabel="weight w(r)", ylim=(0, 1.05), title="weight")
+    for ax in (left, right):
+        grid(ax)
+    right.legend(fontsize=9)
+    return fig
+
+
+def trajectories_figure(
+    ground_truth,
+    odometry,
+    optimized,
+    loop_pairs=(),
+    inset=None,
+    title="trajectories from above",
+    inset_at=(0.42, 0.2, 0.42, 0.6),
+):
+    """Top view of the three trajectories in their colours, loop edges
+    drawn on the optimised one; ``inset`` = (xmin, xmax, ymin, ymax) zooms."""
+    gt, odo, opt = xy_of(ground_truth), xy_of(odometry), xy_of(optimized)
+    pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
+    fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
+
+    def draw(axis):
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=3, label="ground truth")
+        axis.plot(odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.6, label="odometry only")
+        axis.plot(opt[:, 0], opt[:, 1], color=COLORS["optimized"], lw=1.6, label="after optimisation")
+        if len(pairs):
+            axis.add_collection(
+                LineCollection(
+                    segments(opt[pairs[:, 0]], opt[pairs[:, 1]]),
+                    colors=COLORS["loop"],
+                    linewidths=1.2,
+                    alpha=0.7,
+                    zorder=1,
+                    label="loop edges",
+                )
+            )
+
+    draw(ax)
+    ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
+    grid(ax)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
+    if inset is not None:
+        zoom = ax.inset_axes(list(inset_at))
+        draw(zoom)
+        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
+        ax.indicate_inset_zoom(zoom, edgecolor="black")
+    return fig
+
+
+def position_errors_figure(x, errors: dict, xlabel="node (accepted scan)", loop_nodes=()):
+    """Distance from the true position, node by node, one line per
+    trajectory; ``errors`` maps a label (whose colour key is found from
+    "odometry"/"optimi") to (N,) errors in metres. Loop nodes are marked."""
+    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    for name, values in errors.items():
+        color = COLORS["odometry"] if "odometry" in name else COLORS["optimized"]
+        ax.plot(x, values, color=color, lw=2, label=name)
+    for k, node in enumerate(loop_nodes):
+        ax.axvline(node, color=COLORS["loop"], lw=1, alpha=0.6, label="a loop edge arrives" if k == 0 else None)
+    ax.set(xlabel=xlabel, ylabel="position error (m)", ylim=(0, None))
+    grid(ax)
+    ax.legend(fontsize=9, loc="upper left")
+    return fig
+
+
+def loop_weights_figure(labels, whitened, weights):
+    """Each loop edge after optimisation: its whitened residual (sigmas) and
+    the weight the robust kernel gave it."""
+    x = np.arange(len(labels))
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 4.6), sharex=True, constrained_layout=True)
+    top.bar(x, whitened, color=COLORS["loop"], width=0.7)
+    top.set(ylabel="residual (sigmas)", title="loop edges after optimisation")
+    bottom.bar(x, weights, color=COLORS["loop"], width=0.7)
+    bottom.axhline(1, color="black", lw=1, ls="--")
+    bottom.set(ylabel="kernel weight", ylim=(0, 1.1))
+    bottom.set_xticks(x, labels, rotation=60, fontsize=8)
+    bottom.set_xlabel("loop edge (older node - current node)")
+    for ax in (top, bottom):
+        grid(ax)
+    return fig
+
+
+def bad_edge_figure(ground_truth, results: dict, bad_pair, inset=None):
+    """One panel per kernel: the trajectory optimised with a deliberately
+    wrong loop edge (drawn dashed black), against the ground truth."""
+    gt = xy_of(ground_truth)
+    n = len(results)
+    fig, axes = plt.subplots(1, n, figsize=(6.2 * n, 4.4), squeeze=False, sharey=True, constrained_layout=True)
+    for ax, (title, poses) in zip(axes[0], results.items(), strict=True):
+        xy = xy_of(poses)
+        ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=3, label="ground truth")
+        ax.plot(xy[:, 0], xy[:, 1], color=COLORS["optimized"], lw=1.6, label="after optimisation")
+        i, j = bad_pair
+        ax.plot(*segments(xy[[i]], xy[[j]])[0].T, "k--", lw=1.5, label="the wrong loop edge")
+        ax.plot(*xy[[i, j]].T, "ko", ms=5)
+        ax.set(title=title, xlabel="x (m)", aspect="equal")
+        grid(ax)
+    axes[0, 0].set_ylabel("y (m)")
+    axes[0, 0].legend(loc="center", fontsize=9)
+    return fig

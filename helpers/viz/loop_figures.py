@@ -1,0 +1,312 @@
+"""Figures for notebook 5: loop-candidate queries, search radii, loop-edge errors."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Circle
+
+from ..submaps import centre_scan_id
+from .style import COLORS, GREY, LIGHT, grid, xy_of
+
+
+def candidates_figure(
+    centres,
+    n_eligible: int,
+    position,
+    true_position,
+    base_radius: float,
+    radius: np.ndarray,
+    tried=(),
+    matched=(),
+    true_centres=None,
+    margin: float = 60.0,
+):
+    """Top view around one query: every submap centre (eligible black,
+    too recent light grey), the scan's odometry position (red star) and its
+    true position (green star), the reference's fixed search circle (dashed)
+    and each eligible submap's grown radius drawn as a faint ring. Tried
+    submaps are ringed in orange, matched ones filled orange."""
+    c = xy_of(centres)
+    p = np.asarray(position)[:2]
+    fig, ax = plt.subplots(figsize=(9, 6.2), constrained_layout=True)
+    ax.plot(c[:, 0], c[:, 1], color=LIGHT, lw=1, zorder=1)
+    ax.scatter(*c[n_eligible:].T, s=26, color="white", edgecolor=GREY, zorder=2, label="too recent")
+    ax.scatter(*c[:n_eligible].T, s=18, color="black", zorder=3, label="eligible submap centre")
+    biggest = float(np.max(radius[:n_eligible])) if n_eligible else base_radius
+    ax.add_patch(
+        Circle(
+            p,
+            base_radius,
+            fill=False,
+            color="black",
+            ls="--",
+            lw=1.5,
+            zorder=4,
+            label=f"reference radius {base_radius:.1f} m",
+        )
+    )
+    nearest = int(np.argmin(np.linalg.norm(c[:n_eligible] - p, axis=1))) if n_eligible else None
+    if nearest is not None:
+        ax.add_patch(
+            Circle(
+                p,
+                radius[nearest],
+                fill=False,
+                color=COLORS["loop"],
+                lw=2,
+                zorder=4,
+                label=f"grown radius {radius[nearest]:.1f} m (nearest old submap)",
+            )
+        )
+    tried, matched = np.asarray(tried, int), np.asarray(matched, int)
+    if len(tried):
+        ax.scatter(
+            *c[tried].T, s=140, facecolor="none", edgecolor=COLORS["loop"], lw=2, zorder=5, label="registered by ICP"
+        )
+    if len(matched):
+        ax.scatter(*c[matched].T, s=60, color=COLORS["loop"], zorder=6, label="matched (RMSE below threshold)")
+    if true_centres is not None:
+        t = xy_of(true_centres)
+        ax.scatter(
+            *t[:n_eligible].T, s=8, color=COLORS["ground_truth"], zorder=2, alpha=0.6, label="true submap centres"
+        )
+    ax.plot(*p, "*", color=COLORS["odometry"], ms=17, zorder=7, label="the scan, odometry position")
+    ax.plot(
+        *np.asarray(true_position)[:2],
+        "*",
+        color=COLORS["ground_truth"],
+        ms=13,
+        zorder=7,
+        label="the scan, true position",
+    )
+    half = max(margin, 1.3 * biggest if biggest < margin else margin)
+    ax.set(
+        xlim=(p[0] - 1.6 * half, p[0] + 1.6 * half),
+        ylim=(p[1] - half, p[1] + half),
+        aspect="equal",
+        xlabel="x (m)",
+        ylabel="y (m)",
+    )
+    grid(ax)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    return fig
+
+
+def query_search(result, node: int) -> dict:
+    """What the loop query of ``node`` saw, rebuilt from a pipeline result:
+    the submap centres that existed then (odometry frame), how many were
+    eligible, each one's grown search radius, the submaps registered by ICP
+    (nearest first) and the scan's odometry and true positions."""
+    from .loopclosure import distance_flown_since
+
+    config = result.config
+    count = (node + 1) // config.n_scans_per_submap  # submaps built by then
+    centres = result.submaps.centres[:count]
+    position = result.poses_odometry[node][:3, 3]
+    radius = config.loop_closure_search_radius + config.loop_search_growth * distance_flown_since(centres, position)
+    n_eligible = max(0, count - config.sub_map_thresh)
+    distance = np.linalg.norm(centres[:n_eligible] - position, axis=1)
+    near = np.flatnonzero(distance < radius[:n_eligible])
+    near = near[np.argsort(distance[near], kind="stable")]
+    query = next((q for q in result.queries if q.node == node), None)
+    tried = near[: len(query.tried)] if query is not None else near[:0]
+    true_centres = np.array(
+        [result.poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in result.submaps.submaps]
+    )
+    return {
+        "centres": centres,
+        "true_centres": true_centres[:count],
+        "n_eligible": n_eligible,
+        "radius": radius,
+        "distance": distance,
+        "tried": tried,
+        "matched": np.array([] if query is None else query.submap_ids, int),
+        "position": position,
+        "true_position": result.poses_gt[node][:3, 3],
+    }
+
+
+def revisits(result, max_true_distance: float = 10.0) -> dict:
+    """Every node that truly flies over an eligible old submap (true centre
+    within ``max_true_distance`` m): the distance flown since that submap,
+    how far away it looks on the odometry, and whether the node closed a loop."""
+    from .loopclosure import distance_flown_since
+
+    config = result.config
+    n = config.n_scans_per_submap
+    subs = result.submaps.submaps
+    true_centres = np.array([result.poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
+    closed = {loop.j for loop in result.loops}
+    rows = []
+    for node in range(len(result.indices)):
+        count = (node + 1) // n
+        n_eligible = count - config.sub_map_thresh
+        if n_eligible <= 0:
+            continue
+        true_distance = np.linalg.norm(true_centres[:n_eligible] - result.poses_gt[node][:3, 3], axis=1)
+        k = int(np.argmin(true_distance))
+        if true_distance[k] > max_true_distance:
+            continue
+        position = result.poses_odometry[node][:3, 3]
+        flown = distance_flown_since(result.submaps.centres[:count], position)[k]
+        apparent = np.linalg.norm(result.submaps.centres[k] - position)
+        rows.append((node, flown, apparent, node in closed))
+    nodes, flown, apparent, found = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 4
+    return {"nodes": nodes, "flown": flown, "apparent": apparent, "closed": np.asarray(found, bool)}
+
+
+def search_radius_figure(flown, apparent, found, base_radius: float, growth: float):
+    """For every query: the distance flown since the place it revisits (x)
+    against how far away that place looks on the odometry (y), with the
+    reference's fixed radius and the grown one. Places below a line are in
+    reach of that search."""
+    flown, apparent, found = map(np.asarray, (flown, apparent, found))
+    fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
+    x = np.linspace(0, 1.05 * flown.max(), 50)
+    ax.plot(x, np.full_like(x, base_radius), "--", color="black", lw=1.5, label=f"fixed radius {base_radius:.1f} m")
+    ax.plot(
+        x,
+        base_radius + growth * x,
+        color=COLORS["loop"],
+        lw=2,
+        label=f"grown radius: {base_radius:.1f} m + {growth:.0%} of the distance flown",
+    )
+    ax.scatter(
+        flown[found],
+        apparent[found],
+        s=22,
+        color=COLORS["loop"],
+        edgecolor="black",
+        lw=0.5,
+        zorder=3,
+        label="queries that closed a loop",
+    )
+    ax.scatter(
+        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="queries that did not"
+    )
+    ax.set(
+        xlabel="distance flown since the revisited submap (m)",
+        ylabel="its distance on the odometry (m)",
+        ylim=(0, None),
+        xlim=(0, x[-1]),
+    )
+    grid(ax)
+    ax.legend(fontsize=9, loc="upper left")
+    return fig
+
+
+def _moved(points, transform):
+    return points @ transform[:3, :3].T + transform[:3, 3]
+
+
+def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, slab: float = 1.5):
+    """The moving scan (pink) over the fixed scan (cyan), in the fixed
+    scan's frame, once per stage: a top view (top row, cropped to
+    ``|y| < half_width``) and a side view of a thin slab across the track
+    (bottom row, points with ``|x| < slab``). ``stages`` maps a title to the
+    4 x 4 transform applied to ``moving``."""
+    n = len(stages)
+    fig, axes = plt.subplots(
+        2, n, figsize=(5.2 * n, 6.4), squeeze=False, constrained_layout=True, gridspec_kw={"height_ratios": [1.5, 1]}
+    )
+    keep_f = np.abs(fixed[:, 1]) < half_width
+    for col, (title, transform) in enumerate(stages.items()):
+        moved = _moved(moving, transform)
+        keep_m = np.abs(moved[:, 1]) < half_width
+        top, side = axes[0, col], axes[1, col]
+        for points, key in ((fixed[keep_f], "fixed"), (moved[keep_m], "moving")):
+            top.scatter(points[:, 1], points[:, 0], s=2, color=COLORS[key], linewidths=0, alpha=0.8)
+        top.axhspan(-slab, slab, color="black", alpha=0.08)
+        top.set(title=title, aspect="equal", xlim=(half_width, -half_width), xlabel="y (m)")
+        for points, key in ((fixed, "fixed"), (moved, "moving")):
+            cut = points[(np.abs(points[:, 0]) < slab) & (np.abs(points[:, 1]) < half_width)]
+            side.plot(cut[:, 1], cut[:, 2], ".", ms=3, color=COLORS[key])
+        side.set(xlim=(half_width, -half_width), xlabel="y (m)")
+        grid(side)
+    axes[0, 0].set_ylabel("x, forward (m)")
+    axes[1, 0].set_ylabel("z (m), slab across the track")
+    for key, name in (("fixed", "fixed: the old scan"), ("moving", "moving: the current scan")):
+        axes[0, -1].scatter([], [], color=COLORS[key], s=25, label=name)
+    axes[0, -1].legend(loc="upper right", fontsize=9, framealpha=0.95)
+    return fig
+
+
+def rmse_offsets_figure(offsets, point_to_point, surface):
+    """Both registration scores of one truly aligned pair shifted along the
+    track by each offset: the point-to-point RMSE and the RMSE along the
+    fixed cloud's normals."""
+    fig, ax = plt.subplots(figsize=(8, 3.8), constrained_layout=True)
+    ax.plot(offsets, point_to_point, "o-", color=GREY, lw=2, label="point-to-point RMSE (the reference's)")
+    ax.plot(offsets, surface, "o-", color=COLORS["loop"], lw=2, label="RMSE along the normals (ours)")
+    ax.set(xlabel="shift along the track from the true alignment (m)", ylabel="score (m)", ylim=(0, None))
+    grid(ax)
+    ax.legend(fontsize=9)
+    return fig
+
+
+def queries_figure(nodes, tried, best, accepted, thresholds: dict):
+    """Every loop query: each submap registered (small grey dots), the best
+    scan-to-scan match of queries that found a submap (orange if it became
+    a loop edge, black cross if not), and the thresholds."""
+    fig, ax = plt.subplots(figsize=(10, 4.2), constrained_layout=True)
+    xs = np.concatenate([np.full(len(t), n) for n, t in zip(nodes, tried, strict=True)])
+    ys = np.concatenate(tried)
+    ax.scatter(xs, ys, s=10, color=GREY, label="a submap registered (its RMSE)", zorder=2)
+    nodes, best, accepted = np.asarray(nodes), np.asarray(best), np.asarray(accepted, bool)
+    has = np.isfinite(best)
+    ax.scatter(
+        nodes[has & accepted],
+        best[has & accepted],
+        s=40,
+        color=COLORS["loop"],
+        edgecolor="black",
+        lw=0.5,
+        zorder=4,
+        label="best scan match: loop edge",
+    )
+    ax.scatter(
+        nodes[has & ~accepted],
+        best[has & ~accepted],
+        s=40,
+        marker="x",
+        color="black",
+        zorder=4,
+        label="best scan match: rejected",
+    )
+    merged = {}
+    for name, value in thresholds.items():  # thresholds of equal value share one line
+        merged.setdefault(value, []).append(name)
+    for (value, names), ls in zip(merged.items(), ("--", ":"), strict=False):
+        ax.axhline(value, color="black", ls=ls, lw=1.2, label=f"{' = '.join(names)} = {value:g} m")
+    top = min(max(float(np.nanmax(ys)), *thresholds.values()) * 1.15, 3.0)
+    ax.set(xlabel="node (accepted scan) of the query", ylabel="RMSE along the normals (m)", ylim=(0, top))
+    grid(ax)
+    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    return fig
+
+
+def loop_errors_figure(error_m, error_deg, limits=(1.0, 2.0)):
+    """Each accepted loop edge's error against the ground truth: translation
+    (m) against rotation (deg), with the box inside which a loop counts as right."""
+    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
+    ax.add_patch(plt.Rectangle((0, 0), *limits, color=COLORS["ground_truth"], alpha=0.12, label="counted as right"))
+    ax.scatter(
+        error_m,
+        error_deg,
+        s=36,
+        color=COLORS["loop"],
+        edgecolor="black",
+        lw=0.5,
+        zorder=3,
+        label=f"loop edges ({len(error_m)})",
+    )
+    ax.set(
+        xlabel="translation error (m)",
+        ylabel="rotation error (deg)",
+        xlim=(0, 1.15 * max(limits[0], np.max(error_m, initial=0))),
+        ylim=(0, 1.15 * max(limits[1], np.max(error_deg, initial=0))),
+    )
+    grid(ax)
+    ax.legend(fontsize=9, loc="upper right")
+    return fig

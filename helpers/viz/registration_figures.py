@@ -1,0 +1,203 @@
+"""Figures for notebook 3: one pair of scans, step by step, then the odometry."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.collections import LineCollection
+
+from .parameter_figures import MATCH_COLORS, _grid
+from .style import COLORS, xy_of
+
+HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
+HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")
+
+
+def _top_view(ax, points, color=None, scalars=None, size=1.5, **kwargs):
+    """Sensor-frame points seen from above: y (to the left) across, x (forward) up."""
+    if scalars is not None:
+        return ax.scatter(points[:, 1], points[:, 0], c=scalars, s=size, linewidths=0, **kwargs)
+    return ax.scatter(points[:, 1], points[:, 0], color=color, s=size, linewidths=0, **kwargs)
+
+
+def clouds_figure(moving, fixed, names=("moving", "fixed")):
+    """The two downsampled clouds from above, one above the other, coloured by height."""
+    low, high = np.percentile(np.concatenate([moving[:, 2], fixed[:, 2]]), [1, 99])
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5.2), sharex=True, constrained_layout=True)
+    for ax, points, name, key in zip(axes, (moving, fixed), names, ("moving", "fixed"), strict=True):
+        art = _top_view(ax, points, scalars=points[:, 2], size=3, cmap="gist_earth", vmin=low, vmax=high)
+        ax.set_title(f"{name}: {len(points)} points", color=COLORS[key], fontweight="bold", loc="left")
+        ax.set(ylabel="x, forward (m)", aspect="equal")
+    axes[-1].set_xlabel("y, to the left of the drone (m)")
+    axes[-1].invert_xaxis()
+    fig.colorbar(art, ax=axes, label="z, sensor frame (m)", shrink=0.8)
+    return fig
+
+
+def descriptor_figure(descriptors: dict):
+    """The 33 bins of a few FPFH descriptors, side by side, coloured by histogram.
+
+    ``descriptors`` maps a label to a (33,) normalised descriptor; the first
+    is drawn as bars, the others as outlined steps over it."""
+    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    bins = np.arange(33)
+    items = list(descriptors.items())
+    label, first = items[0]
+    colors = np.repeat(HISTOGRAM_COLORS, 11)
+    ax.bar(bins, first, 0.85, color=colors, label=label)
+    styles = (("black", "-"), ("#d62728", "--"), ("#555555", ":"))
+    for (name, values), (color, ls) in zip(items[1:], styles, strict=False):
+        ax.step(bins, values, where="mid", color=color, ls=ls, lw=1.6, label=name)
+    for h, name in enumerate(HISTOGRAM_NAMES):
+        ax.axvline(11 * h - 0.5, color="#999999", lw=0.8)
+        ax.text(
+            11 * h + 5,
+            1.0,
+            rf"angle $\{name}$",
+            transform=ax.get_xaxis_transform(),
+            ha="center",
+            va="bottom",
+            color=HISTOGRAM_COLORS[h],
+            fontsize=10,
+            fontweight="bold",
+        )
+    ax.set(xlim=(-0.7, 32.7), xlabel="bin (11 per angle)", ylabel="normalised count")
+    ax.set_xticks([0, 5, 10, 11, 16, 21, 22, 27, 32])
+    _grid(ax)
+    ax.legend(fontsize=9, loc="upper right")
+    return fig
+
+
+def matches_figure(moving, fixed, matches, inliers, shown: int = 80, gap: float = 25.0, seed: int = 0):
+    """Both clouds from above, the moving one drawn above the fixed one, and a
+    random subsample of match lines: inliers of the robust fit in purple,
+    rejected matches in grey."""
+    rng = np.random.default_rng(seed)
+    lift = fixed[:, 0].max() - moving[:, 0].min() + gap  # moving drawn this much farther forward
+    fig, ax = plt.subplots(figsize=(11, 5.4), constrained_layout=True)
+    _top_view(ax, fixed, color=COLORS["fixed"], size=2)
+    _top_view(ax, moving + [lift, 0, 0], color=COLORS["moving"], size=2)
+    for kind, mask in (("outlier", ~inliers), ("inlier", inliers)):
+        picked = np.flatnonzero(mask)
+        picked = rng.choice(picked, size=min(shown, len(picked)), replace=False) if len(picked) else picked
+        a, b = moving[matches[picked, 0]], fixed[matches[picked, 1]]
+        segments = np.stack([np.column_stack([a[:, 1], a[:, 0] + lift]), np.column_stack([b[:, 1], b[:, 0]])], 1)
+        width, alpha = (1.0, 0.9) if kind == "inlier" else (0.6, 0.6)
+        ax.add_collection(
+            LineCollection(
+                segments,
+                colors=MATCH_COLORS[kind],
+                linewidths=width,
+                alpha=alpha,
+                label=f"{kind}s ({mask.sum()}, {len(picked)} drawn)",
+            )
+        )
+    ax.set(xlabel="y, to the left of the drone (m)", ylabel="x, forward (m)", aspect="equal")
+    ax.set_yticks([])
+    ax.invert_xaxis()
+    ax.text(0.01, 0.97, "moving", transform=ax.transAxes, color=COLORS["moving"], fontweight="bold", va="top")
+    ax.text(0.01, 0.03, "fixed", transform=ax.transAxes, color=COLORS["fixed"], fontweight="bold")
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=9, frameon=False)
+    return fig
+
+
+def profile_figure(moving, fixed, stages: dict, y: float, half_width: float = 0.5):
+    """Side views of the moving cloud (pink) over the fixed one (cyan), one per
+    stage: the points within ``half_width`` of the line ``y`` (fixed scan's
+    frame), forward distance across, height up. A wrong motion shows as
+    doubled roofs and walls. ``stages`` maps a title to a 4 x 4 transform
+    applied to ``moving``."""
+    n = len(stages)
+    fig, axes = plt.subplots(n, 1, figsize=(10, 2.2 * n + 0.4), sharex=True, sharey=True, constrained_layout=True)
+    for ax, (title, transform) in zip(np.atleast_1d(axes), stages.items(), strict=True):
+        moved = moving @ transform[:3, :3].T + transform[:3, 3]
+        for points, key, marker in ((fixed, "fixed", "o"), (moved, "moving", "o")):
+            band = points[np.abs(points[:, 1] - y) < half_width]
+            ax.plot(band[:, 0], band[:, 2], marker, color=COLORS[key], ms=3.5, label=key, alpha=0.9)
+        ax.set_title(title, loc="left")
+        ax.set_ylabel("z (m)")
+        _grid(ax)
+    axes[0].legend(loc="upper right", fontsize=9, ncol=2, framealpha=0.95)
+    axes[-1].set_xlabel("x, forward (m)")
+    return fig
+
+
+def surface_error_figure(moving, errors: dict, limit: float = 2.0):
+    """The moving cloud from above, once per stage, each point coloured by its
+    distance to the true surface once moved by that stage's transform.
+
+    ``errors`` maps a title to the (N,) distances in metres."""
+    n = len(errors)
+    fig, axes = plt.subplots(n, 1, figsize=(10, 2.3 * n + 0.6), sharex=True, constrained_layout=True)
+    axes = np.atleast_1d(axes)
+    for ax, (title, distance) in zip(axes, errors.items(), strict=True):
+        order = np.argsort(distance)  # the worst points on top
+        art = _top_view(ax, moving[order], scalars=distance[order], size=3, cmap="magma_r", vmin=0, vmax=limit)
+        ax.set_title(f"{title}: median {np.median(distance) * 100:.0f} cm", loc="left")
+        ax.set(ylabel="x (m)", aspect="equal")
+    axes[-1].set_xlabel("y, to the left of the drone (m)")
+    axes[-1].invert_xaxis()
+    fig.colorbar(art, ax=axes, label="distance to the true surface (m)", shrink=0.8, extend="max")
+    return fig
+
+
+def trajectory_figure(ground_truth, estimated, label="odometry", extra=None):
+    """Top view of a ground-truth and an estimated trajectory ((N, 4, 4) poses or (N, 2+) positions)."""
+    gt, est = xy_of(ground_truth), xy_of(estimated)
+    fig, ax = plt.subplots(figsize=(9, 5.4), constrained_layout=True)
+    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+    ax.plot(
+        est[:, 0],
+        est[:, 1],
+        color=COLORS["odometry"] if label == "odometry" else COLORS["optimized"],
+        lw=1.8,
+        label=label,
+    )
+    ax.plot(*gt[0], "o", color="black", ms=7, label="start")
+    ax.annotate("end", est[-1], xytext=(8, -4), textcoords="offset points", fontsize=9)
+    ax.annotate("end", gt[-1], xytext=(8, 6), textcoords="offset points", fontsize=9)
+    ax.plot(*est[-1], "s", color=COLORS["odometry"], ms=6)
+    ax.plot(*gt[-1], "s", color=COLORS["ground_truth"], ms=6)
+    for points, color, name in extra or ():
+        ax.plot(points[:, 0], points[:, 1], color=color, lw=1.8, label=name)
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="trajectory seen from above")
+    _grid(ax)
+    ax.legend(loc="center", fontsize=9)
+    return fig
+
+
+def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, position_m, turning=None):
+    """The odometry step by step: the error of every scan-to-scan motion
+    (translation, rotation), the MSAC inliers behind it, and the position
+    error they add up to. ``turning`` (one bool per step) shades the turns."""
+    indices = np.asarray(indices)
+    steps = indices[1:]
+    fig, axes = plt.subplots(4, 1, figsize=(10, 8.6), sharex=True, constrained_layout=True)
+    panels = (
+        (steps, translation_cm, "translation error (cm)", "error of each scan-to-scan motion"),
+        (steps, rotation_deg, "rotation error (deg)", None),
+        (steps, n_inliers, "MSAC inliers", None),
+    )
+    for ax, (x, y, label, title) in zip(axes, panels, strict=False):
+        ax.plot(x, y, ".-", color=COLORS["odometry"], lw=0.8, ms=4)
+        ax.set(ylabel=label, title=title, ylim=(0, None))
+    axes[2].lines[0].set_color(MATCH_COLORS["inlier"])
+    axes[3].plot(indices, position_m, color=COLORS["odometry"], lw=2)
+    axes[3].set(
+        ylabel="position error (m)", xlabel="scan index", title="drift: distance to the true position", ylim=(0, None)
+    )
+    for ax in axes:
+        _grid(ax)
+        if turning is not None:
+            _shade(ax, steps, np.asarray(turning, bool))
+    if turning is not None:
+        axes[0].fill_between([], [], color="#f3c623", alpha=0.25, label="turning")
+        axes[0].legend(loc="upper right", fontsize=9)
+    return fig
+
+
+def _shade(ax, x, mask):
+    """Shade the runs of ``x`` where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)

@@ -1,0 +1,42 @@
+"""The look shared by every picture: one colour per thing in all seven
+notebooks, the height colour map, the size of a 3-D view, the grid."""
+
+from __future__ import annotations
+
+import numpy as np
+
+# One colour per thing, in all seven notebooks.
+COLORS = {
+    "ground_truth": "#2ca02c",  # green
+    "odometry": "#d62728",  # red
+    "optimized": "#1f77b4",  # blue
+    "loop": "#ff7f0e",  # orange
+    "waypoints": "#e41a1c",
+    "moving": "#e377c2",  # the scan being registered
+    "fixed": "#17becf",  # the scan it is registered to
+}
+CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
+HEIGHT_CMAP = "gist_earth"
+WINDOW = (900, 600)  # pixels of a 3-D view
+GREY = "#9a9a9a"  # what is there but not the point (too recent submaps, ...)
+LIGHT = "#d9d9d9"
+
+
+def grid(ax, color: str = "#e6e6e6", open_frame: bool = False) -> None:
+    """A light grid behind the data (and no top and right spines with ``open_frame``)."""
+    ax.grid(True, color=color, lw=0.8)
+    ax.set_axisbelow(True)
+    if open_frame:
+        for side in ("top", "right"):
+            ax.spines[side].set_visible(False)
+
+
+def xy_of(trajectory) -> np.ndarray:
+    """(N, 2) positions from (N, 4, 4) poses or (N, 2+) positions."""
+    trajectory = np.asarray(trajectory, dtype=float)
+    return trajectory[:, :2, 3] if trajectory.ndim == 3 else trajectory[:, :2]
+
+
+def segments(a, b) -> np.ndarray:
+    """(L, 2, 2) top-view segments from two (L, 2+) arrays of end points."""
+    return np.stack([np.asarray(a)[:, :2], np.asarray(b)[:, :2]], axis=1)

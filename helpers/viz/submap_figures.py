@@ -1,0 +1,120 @@
+"""Figures for notebook 4: the submaps, their centres and the cost of a query."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Circle
+
+from .render import pyvista
+from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, xy_of
+
+
+def submap_panels(
+    scans: list[np.ndarray], submap: np.ndarray, titles: list[str], pose: np.ndarray, window=(1300, 1150)
+) -> np.ndarray:
+    """The scans of one submap, each on its own, and the submap they merge
+    into, one above the other in PyVista, all in the map frame and on one
+    height colour scale. The camera looks down at 68 degrees from behind the
+    drone (``pose``, the submap's pose, gives the heading), so the strip runs
+    across the picture. Returns an RGB array."""
+    pv = pyvista()
+
+    clouds = [*scans, submap]
+    every = np.concatenate(clouds)
+    low, high = np.percentile(every[:, 2], [1, 99.5])
+    clim = (low, high + 0.3 * (high - low))  # keep the highest roofs off the colour map's white end
+    focal = (every.min(axis=0) + every.max(axis=0)) / 2
+    width = np.ptp(every @ pose[:3, 1])  # extent across the track
+    heading = pose[:3, 0] * np.array([1.0, 1.0, 0.0])
+    heading /= np.linalg.norm(heading)
+    elevation = np.radians(68.0)
+    direction = -np.cos(elevation) * heading + np.array([0.0, 0.0, np.sin(elevation)])
+    plotter = pv.Plotter(off_screen=True, window_size=list(window), shape=(len(clouds), 1), border=False)
+    plotter.set_background("white")
+    for k, (points, title) in enumerate(zip(clouds, titles, strict=True)):
+        plotter.subplot(k, 0)
+        cloud = pv.PolyData(np.asarray(points, np.float32))
+        cloud["height (m)"] = points[:, 2]
+        plotter.add_mesh(
+            cloud,
+            scalars="height (m)",
+            cmap=HEIGHT_CMAP,
+            clim=clim,
+            point_size=2.0,
+            show_scalar_bar=k == len(clouds) - 1,
+            scalar_bar_args={
+                "title": "height (m)",
+                "color": "black",
+                "vertical": True,
+                "position_x": 0.91,
+                "position_y": 0.1,
+                "height": 0.8,
+                "width": 0.05,
+                "fmt": "%.0f",
+            },
+        )
+        plotter.add_text(f"{title}: {len(points)} points", font_size=11, color="black")
+        plotter.camera_position = [tuple(focal + 0.56 * width * direction), tuple(focal), (0.0, 0.0, 1.0)]
+    image = plotter.screenshot(return_img=True)
+    plotter.close()
+    return image
+
+
+def submap_centres_figure(ground_truth, odometry, centres, scan_points=None, label_every: int = 10):
+    """Top view: the odometry trajectory (red) and the ground truth (green),
+    one dot per submap centre (its id every ``label_every``), over the
+    submap points in light grey when given."""
+    gt, odo, c = xy_of(ground_truth), xy_of(odometry), xy_of(centres)
+    fig, ax = plt.subplots(figsize=(10, 5.6), constrained_layout=True)
+    if scan_points is not None:
+        low, high = gt.min(axis=0) - 40, gt.max(axis=0) + 40
+        near = np.all((scan_points[:, :2] > low) & (scan_points[:, :2] < high), axis=1)
+        ax.scatter(*scan_points[near, :2].T, s=0.6, color="#c8c8c8", linewidths=0, rasterized=True)
+        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]))
+    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+    ax.plot(odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.5, label="odometry (the submaps are built on it)")
+    ax.scatter(c[:, 0], c[:, 1], s=22, color="black", zorder=3, label=f"submap centres ({len(c)})")
+    for k in range(0, len(c), label_every):
+        ax.annotate(str(k), c[k], xytext=(5, 5), textcoords="offset points", fontsize=9)
+    ax.plot(*gt[0], "o", color="black", ms=9, mfc="none", mew=2, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="submap centres along the flight, seen from above")
+    grid(ax)
+    ax.legend(loc="center", fontsize=9)
+    return fig
+
+
+def recent_rule_figure(centres, position, n_excluded: int, radius: float, title: str):
+    """Top view of the submap centres at one moment of the flight: the
+    ``n_excluded`` newest (never candidates) in light grey, the older ones
+    (eligible) in black, the current position and the search radius."""
+    c = xy_of(centres)
+    eligible = c[: max(0, len(c) - n_excluded)]
+    excluded = c[len(eligible) :]
+    fig, ax = plt.subplots(figsize=(10, 5.4), constrained_layout=True)
+    ax.plot(c[:, 0], c[:, 1], color=LIGHT, lw=1, zorder=1)
+    ax.scatter(*eligible.T, s=22, color="black", zorder=3, label=f"eligible ({len(eligible)} oldest)")
+    ax.scatter(*excluded.T, s=30, color="white", edgecolor=GREY, zorder=3, label=f"too recent ({len(excluded)} newest)")
+    ax.plot(*position[:2], "*", color=COLORS["odometry"], ms=16, zorder=4, label="the drone now")
+    ax.add_patch(Circle(position[:2], radius, fill=False, color=COLORS["loop"], lw=2, zorder=4, label="search radius"))
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
+    grid(ax)
+    ax.legend(loc="center", fontsize=9)
+    return fig
+
+
+def query_cost_figure(n_scans, n_submaps, points_per_scan, points_per_submap):
+    """Two bars each: how many clouds a query could register against, and
+    how many points each of them holds, for scans and for submaps."""
+    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), constrained_layout=True)
+    names = ["scans", "submaps"]
+    colors = [GREY, COLORS["loop"]]
+    for ax, values, title in (
+        (axes[0], [n_scans, n_submaps], "clouds to register against"),
+        (axes[1], [points_per_scan, points_per_submap], "points per cloud (median)"),
+    ):
+        bars = ax.bar(names, values, color=colors, width=0.6)
+        ax.bar_label(bars, fmt="%d", padding=2)
+        ax.set(title=title, ylim=(0, 1.18 * max(values)))
+        grid(ax)
+    return fig
