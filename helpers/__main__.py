@@ -78,7 +78,7 @@ def _dataset(args) -> int:
 def _run(args) -> int:
     from .config import load_config
     from .dataset import create_dataset
-    from .evaluation import map_errors
+    from .evaluation import map_errors, run_metrics
     from .pipeline import run_slam, write_run
 
     config = load_config(args.config)
@@ -88,8 +88,8 @@ def _run(args) -> int:
     created = time.perf_counter() - start
     result = run_slam(data, config.slam, progress=interactive)
     result.runtime_s = {"dataset": created, **result.runtime_s}
-    out = write_run(result, config, args.out, map_error=map_errors(result.map_points, data.map_points))
-    m = result.metrics()
+    m = run_metrics(data, result, map_errors(result.map_points, data.map_points))
+    out = write_run(result, config, args.out, m, data.poses[result.indices])
     print(
         f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
         f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "

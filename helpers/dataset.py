@@ -13,6 +13,7 @@ import numpy as np
 from . import paths
 from .config import SensorConfig
 from .errors import SlamError
+from .geometry import transform_points
 from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
 from .progress import progress_bar
@@ -46,8 +47,7 @@ class Dataset:
 
     def scan_in_map(self, index: int) -> np.ndarray:
         """Scan ``index`` moved into the map frame by its ground-truth pose."""
-        pose = self.poses[index]
-        return self.scans[index] @ pose[:3, :3].T + pose[:3, 3]
+        return transform_points(self.scans[index], self.poses[index])
 
     def surface_distances(self, points: np.ndarray) -> np.ndarray:
         """Distance (m) from map-frame points to the surface the rays hit."""

@@ -17,6 +17,7 @@ import numpy as np
 import open3d as o3d
 
 from .errors import SlamError
+from .geometry import check_points
 
 HISTOGRAMS = 3  # FPFH is three histograms ...
 BINS = 11  # ... of 11 bins each
@@ -24,18 +25,6 @@ UP = np.array([0.0, 0.0, 1.0])  # normals are turned towards the sensor, which l
 MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache; measured best)
 REACH_MARGIN = 1e-3  # descriptor-distance slack against float32 rounding in the exhaustive search
 MAX_DESCRIPTOR_DISTANCE = np.sqrt(2.0)  # largest distance between unit descriptors with no negative entry
-
-
-def check_points(points, what: str = "point cloud", minimum: int = 1) -> np.ndarray:
-    """``points`` as a float64 (N, 3) array, or a SlamError saying what is wrong."""
-    array = np.asarray(points, dtype=np.float64)
-    if array.ndim != 2 or array.shape[1] != 3:
-        raise SlamError(f"{what} must be an N x 3 array of points, got shape {array.shape}")
-    if len(array) < minimum:
-        raise SlamError(f"{what} has {len(array)} points, at least {minimum} are needed")
-    if not np.isfinite(array).all():
-        raise SlamError(f"{what} contains NaN or infinite coordinates")
-    return array
 
 
 def grid_average(points, step: float) -> np.ndarray:

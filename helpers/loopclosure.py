@@ -22,8 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .errors import SlamError
-from .features import check_points
-from .posegraph import check_pose
+from .geometry import check_points, check_pose, transform_points
 from .submaps import scan_ids_of
 
 log = logging.getLogger(__name__)
@@ -42,7 +41,7 @@ IcpFn = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
 
 
 class LoopCandidates(NamedTuple):
-    """Matching submaps, best (lowest RMSE) first.
+    """Matching submaps, best (lowest RMSE) first, and what the search tried.
 
     ``poses[k]`` is the scan's pose in the map frame that ICP found against
     submap ``ids[k]``; it seeds the scan-to-scan registration.
@@ -51,6 +50,10 @@ class LoopCandidates(NamedTuple):
     ids: np.ndarray  # (L,) submap ids
     scores: np.ndarray  # (L,) ICP RMSE, m
     poses: np.ndarray  # (L, 4, 4)
+    n_eligible: int = 0  # submaps 0 .. n_eligible - 1 were old enough to be searched
+    radius: np.ndarray = np.zeros(0)  # (S,) search radius (m) around each of the S submaps given, grown with the flight
+    tried_ids: np.ndarray = np.zeros(0, dtype=int)  # (A,) the submaps registered by ICP, nearest first
+    tried_rmse: np.ndarray = np.zeros(0)  # (A,) their ICP RMSE, m
 
 
 @dataclass(frozen=True)
@@ -116,7 +119,7 @@ def surface_rmse(moving: np.ndarray, fixed: np.ndarray, transform: np.ndarray, i
     """
     from scipy.spatial import cKDTree
 
-    moved = moving @ transform[:3, :3].T + transform[:3, 3]
+    moved = transform_points(moving, transform)
     distance, nearest = cKDTree(fixed).query(moved, distance_upper_bound=inlier_distance)
     paired = np.isfinite(distance)
     if paired.sum() < SURFACE_NEIGHBORS:
@@ -177,10 +180,11 @@ def find_loop_candidates(
     near = near[np.argsort(distance[near], kind="stable")]
 
     # 3. verify the nearest few by ICP
-    found = []
+    found, tried = [], []
     for submap_id in near[:max_attempts]:
         pose, rmse = icp_fn(scan_points, submaps[submap_id], scan_pose)
         log.debug("submap %d at %.1f m: ICP RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        tried.append(rmse)
         if rmse < loop_closure_threshold:
             found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
 
@@ -191,6 +195,10 @@ def find_loop_candidates(
         np.array([f[1] for f in found], dtype=int),
         np.array([f[0] for f in found], dtype=float),
         np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
+        n_eligible=len(eligible),
+        radius=radius,
+        tried_ids=near[:max_attempts].astype(int),
+        tried_rmse=np.array(tried, dtype=float),
     )
 
 
@@ -206,12 +214,34 @@ def best_scan_match(
 ) -> LoopMatch | None:
     """Register the current scan to every scan of the matching submaps; keep the best.
 
+    The lowest-RMSE match of :func:`best_scan_registration` becomes a
+    :class:`LoopMatch` ``(i, current_id)`` if its RMSE is below
+    ``rmse_threshold``; otherwise there is no loop (None).
+    """
+    best = best_scan_registration(scan_points, current_id, candidates, scans, poses, n_scans_per_submap, icp_fn)
+    if best is None or not best.rmse < rmse_threshold:
+        log.debug("no loop edge: best scan RMSE %s m", None if best is None else round(best.rmse, 3))
+        return None
+    log.info("loop edge %d -> %d, ICP RMSE %.3f m", best.i, best.j, best.rmse)
+    return best
+
+
+def best_scan_registration(
+    scan_points: np.ndarray,
+    current_id: int,
+    candidates: LoopCandidates,
+    scans: Sequence[np.ndarray],
+    poses: np.ndarray,
+    n_scans_per_submap: int,
+    icp_fn: IcpFn,
+) -> LoopMatch | None:
+    """The lowest-RMSE registration of the current scan onto a scan of the
+    matching submaps, whatever its RMSE (None if there is no candidate).
+
     ``scans`` and ``poses`` are all accepted scans (own frames) and the pose
     estimates the submaps were built with. The registration onto scan ``i``
     starts from ``inv(poses[i]) @ candidates.poses[k]``, the scan's pose found
-    against its submap, seen from scan ``i``. The lowest-RMSE match becomes a
-    :class:`LoopMatch` ``(i, current_id)`` if its RMSE is below
-    ``rmse_threshold``; otherwise there is no loop (None).
+    against its submap, seen from scan ``i``.
     """
     scan_points = check_points(scan_points, "the current scan")
     poses = np.asarray(poses, dtype=float)
@@ -224,10 +254,6 @@ def best_scan_match(
             relative, rmse = icp_fn(scan_points, scans[i], init)
             if best is None or rmse < best.rmse:
                 best = LoopMatch(i, int(current_id), check_pose(relative, "the ICP result"), float(rmse))
-    if best is None or not best.rmse < rmse_threshold:
-        log.debug("no loop edge: best scan RMSE %s m", None if best is None else round(best.rmse, 3))
-        return None
-    log.info("loop edge %d -> %d, ICP RMSE %.3f m", best.i, best.j, best.rmse)
     return best
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SlamError
+from .geometry import relative_pose_error
 
 
 @dataclass(frozen=True)
@@ -76,10 +77,7 @@ def rpe(estimated, ground_truth, delta: int = 1) -> RelativeError:
         raise SlamError(f"the RPE step {delta} needs more than {delta} poses, got {len(est)}")
     rel_est = np.linalg.inv(est[:-delta]) @ est[delta:]
     rel_gt = np.linalg.inv(gt[:-delta]) @ gt[delta:]
-    error = np.linalg.inv(rel_gt) @ rel_est
-    translation = np.linalg.norm(error[:, :3, 3], axis=1)
-    cos = (np.trace(error[:, :3, :3], axis1=1, axis2=2) - 1.0) / 2.0
-    rotation = np.degrees(np.arccos(np.clip(cos, -1.0, 1.0)))
+    translation, rotation = relative_pose_error(rel_gt, rel_est)
     return RelativeError(int(delta), ErrorStats(translation, "m"), ErrorStats(rotation, "deg"))
 
 

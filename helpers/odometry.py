@@ -28,7 +28,8 @@ import numpy as np
 
 from .config import SlamConfig
 from .errors import SlamError
-from .features import check_points, fpfh, grid_average, match_features
+from .features import fpfh, grid_average, match_features
+from .geometry import check_points
 from .progress import progress_bar
 from .registration import IcpCloud, estimate_rigid_msac, icp_cloud, refine_icp
 

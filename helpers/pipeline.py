@@ -22,8 +22,7 @@ from . import paths
 from .config import Config, SlamConfig, config_to_dict, config_to_toml
 from .dataset import Dataset, create_dataset
 from .features import grid_average
-from .loopclosure import best_scan_match, find_loop_candidates, icp_with
-from .metrics import ate, rpe
+from .loopclosure import best_scan_registration, find_loop_candidates, icp_with
 from .odometry import OdometryResult, run_odometry
 from .plyio import write_ply
 from .posegraph import ICP_EDGE_SIGMAS, OptimizationResult, PoseGraph, information_from_sigmas
@@ -39,24 +38,6 @@ RUN_MODULES = (
     "config", "dataset", "features", "loopclosure", "mapio", "odometry", "pipeline",
     "posegraph", "registration", "scene", "sensor", "submaps", "waypoints",
 )  # fmt: skip
-FALSE_LOOP_M = 1.0  # a loop edge farther than this from the truth is false ...
-FALSE_LOOP_DEG = 2.0  # ... or turned by more than this
-
-
-@dataclass(frozen=True)
-class LoopClosure:
-    """A loop edge ``pose_j = pose_i @ relative`` and how far it is from the truth."""
-
-    i: int  # the older node
-    j: int  # the current node
-    relative: np.ndarray
-    rmse: float  # m, ICP RMSE of the scan-to-scan match
-    error_m: float  # translation error of ``relative`` against the ground truth
-    error_deg: float  # rotation error, degrees
-
-    @property
-    def false(self) -> bool:
-        return self.error_m > FALSE_LOOP_M or self.error_deg > FALSE_LOOP_DEG
 
 
 @dataclass(frozen=True)
@@ -71,21 +52,27 @@ class Edge:
 
 @dataclass(frozen=True)
 class LoopQuery:
-    """One loop-candidate query that registered at least one old submap."""
+    """One loop-candidate query that registered at least one old submap: what
+    it searched, what it tried and what it kept (figures read these)."""
 
     node: int
-    tried: np.ndarray  # RMSE (m) of every submap the scan was registered to, nearest submap first
+    n_submaps: int  # submaps built when the query ran (centres in ``SlamResult.submaps.centres``)
+    n_eligible: int  # submaps 0 .. n_eligible - 1 were old enough to be searched
+    radius: np.ndarray  # (n_submaps,) search radius (m) around each submap, grown with the distance flown since it
+    tried_ids: np.ndarray  # the submaps registered by ICP, nearest first
+    tried: np.ndarray  # their surface RMSE (m), in the same order
     submap_ids: np.ndarray  # the submaps below loop_closure_threshold, best first
     scores: np.ndarray  # their RMSE, m
     best_scan_rmse: float  # RMSE of the best scan-to-scan match (inf if no submap matched)
-    closure: LoopClosure | None  # the accepted loop edge, if any
+    closure: Edge | None  # the accepted loop edge, if any
 
 
 @dataclass
 class SlamResult:
+    """What a run estimated; :mod:`helpers.evaluation` grades it against the ground truth."""
+
     config: SlamConfig
     indices: np.ndarray  # (K,) dataset index of each node
-    poses_gt: np.ndarray  # (K, 4, 4) ground truth of the nodes
     odometry: OdometryResult
     clouds: list[np.ndarray]  # (N_k, 3) downsampled scans, sensor frame
     submaps: SubmapIndex
@@ -97,7 +84,8 @@ class SlamResult:
     runtime_s: dict = field(default_factory=dict)
 
     @property
-    def loops(self) -> list[LoopClosure]:
+    def loops(self) -> list[Edge]:
+        """The accepted loop edges, in the order they were found."""
         return [q.closure for q in self.queries if q.closure is not None]
 
     @property
@@ -108,46 +96,18 @@ class SlamResult:
     def poses_optimized(self) -> np.ndarray:
         return self.graph.poses
 
-    def metrics(self) -> dict:
-        """The figures of the run, units in the names."""
-        odometry, optimized = ate(self.poses_odometry, self.poses_gt), ate(self.poses_optimized, self.poses_gt)
-        rpe_1 = rpe(self.poses_optimized, self.poses_gt, 1)
-        long_enough = len(self.indices) > 10  # a short flight has no 10-step pairs: those figures are None
-        rpe_10 = rpe(self.poses_optimized, self.poses_gt, 10) if long_enough else None
-        steps = self.odometry.timings
-        return {
-            "n_scans": self.n_scans,
-            "n_accepted": len(self.indices),
-            "n_loop_closures": len(self.loops),
-            "n_false_loop_closures": sum(loop.false for loop in self.loops),
-            "n_odometry_fallbacks": len(self.odometry.fallbacks),
-            "n_extra_edges": len(self.extra_edges),
-            "ate_rmse_odometry_m": odometry.rmse,
-            "ate_rmse_optimized_m": optimized.rmse,
-            "ate_max_optimized_m": optimized.max,
-            "rpe_trans_1_m": rpe_1.translation.rmse,
-            "rpe_rot_1_deg": rpe_1.rotation.rmse,
-            "rpe_trans_10_m": rpe_10.translation.rmse if rpe_10 else None,
-            "rpe_rot_10_deg": rpe_10.rotation.rmse if rpe_10 else None,
-            "graph_error_before": self.graph.error_before,
-            "graph_error_after": self.graph.error_after,
-            "runtime_s": {
-                "total": sum(self.runtime_s.values()),
-                **self.runtime_s,
-                "odometry_per_scan_ms": {stage: float(np.mean(ms)) for stage, ms in steps.items()},
-            },
-        }
-
 
 def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool = False) -> SlamResult:
     """Estimate the trajectory and the map from ``dataset.scans`` alone (the
-    first ground-truth pose anchors the first node, as in the reference)."""
+    first ground-truth pose anchors the first node, as in the reference; no
+    other true pose is read: :mod:`helpers.evaluation` grades the result)."""
     config = config or SlamConfig()
     runtime = {}
+    anchor = dataset.poses[0]
 
     # 1. Odometry: register every accepted scan to the previous one.
     start = time.perf_counter()
-    odometry = run_odometry(dataset, dataset.poses[0], config, progress=progress)
+    odometry = run_odometry(dataset.scans, anchor, config, progress=progress)
     runtime["odometry"] = time.perf_counter() - start
 
     # 2.-3. Submaps and loop-closure queries, scan after scan, on the odometry
@@ -155,7 +115,7 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     start = time.perf_counter()
     step = config.icp_grid_step or config.grid_step
     clouds = [grid_average(dataset.scans[i], step) for i in odometry.indices]
-    submaps, queries = _submaps_and_loops(clouds, odometry.poses, dataset.poses[odometry.indices], config, progress)
+    submaps, queries = submaps_and_loops(clouds, odometry.poses, config, progress)
     runtime["submaps_and_loop_closure"] = time.perf_counter() - start
 
     # 4. Pose graph: odometry edges, edges to older scans, loop edges, the
@@ -165,7 +125,7 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     runtime["edges_back"] = time.perf_counter() - start
     start = time.perf_counter()
     graph = build_pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
-    optimized = graph.optimize(anchor_pose=dataset.poses[0], loop_kernel=config.loop_kernel)
+    optimized = graph.optimize(anchor_pose=anchor, loop_kernel=config.loop_kernel)
     runtime["pose_graph"] = time.perf_counter() - start
 
     # 5. The map: every accepted scan at its optimised pose, merged on a grid.
@@ -176,7 +136,6 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     return SlamResult(
         config=config,
         indices=odometry.indices,
-        poses_gt=dataset.poses[odometry.indices],
         odometry=odometry,
         clouds=clouds,
         submaps=submaps,
@@ -189,73 +148,68 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     )
 
 
-def _submaps_and_loops(clouds, poses, poses_gt, config: SlamConfig, progress: bool):
-    """Build a submap every ``n_scans_per_submap`` nodes and query old
-    submaps for loops once there are more than ``sub_map_thresh`` of them."""
-    scores = []  # every registration score of the current query, in order
+def submaps_and_loops(clouds, poses, config: SlamConfig, progress: bool = False):
+    """The reference's main loop over the accepted scans (own frames, at their
+    odometry ``poses``): add the scan to the current submap (a new one every
+    ``n_scans_per_submap`` scans) and, once there are more than
+    ``sub_map_thresh`` submaps, query the old ones for a loop.
+    Returns the submaps and the queries that registered something."""
     icp = icp_with(config.metric, config.inlier_distance)
-
-    def scored_icp(moving, fixed, init):
-        transform, rmse = icp(moving, fixed, init)
-        scores.append(rmse)
-        return transform, rmse
-
     submaps = SubmapIndex(config.n_scans_per_submap, config.align_grid_step)
     queries: list[LoopQuery] = []
-    bar = progress_bar(len(clouds), "submaps and loops") if progress else None
+    bar = progress_bar(len(clouds), "submaps and loops", enabled=progress)
     for node, (cloud, pose) in enumerate(zip(clouds, poses, strict=True)):
         submaps.add_scan(cloud, pose)
         if len(submaps) > config.sub_map_thresh:
-            scores.clear()
-            candidates = find_loop_candidates(
-                submaps.points,
-                submaps.centres,
-                cloud,
-                pose,
-                len(submaps) - 1,
-                config.sub_map_thresh,
-                config.loop_closure_search_radius,
-                config.loop_closure_threshold,
-                scored_icp,
-                radius_growth=config.loop_search_growth,
-            )
-            tried = np.array(scores)
-            closure, best = None, float("inf")
-            if len(candidates.ids):
-                scores.clear()
-                match = best_scan_match(
-                    cloud, node, candidates, clouds, poses, config.n_scans_per_submap, config.rmse_threshold, scored_icp
-                )
-                best = min(scores)
-                closure = None if match is None else _judged(match, poses_gt)
-            if len(tried):
-                queries.append(LoopQuery(node, tried, candidates.ids, candidates.scores, best, closure))
-        if bar is not None:
-            bar.set_postfix(loops=sum(q.closure is not None for q in queries), refresh=False)
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+            query = loop_query(node, cloud, pose, submaps, clouds, poses, icp, config)
+            if query is not None:
+                queries.append(query)
+        bar.set_postfix(loops=sum(q.closure is not None for q in queries), refresh=False)
+        bar.update(1)
+    bar.close()
     return submaps, queries
 
 
-def _judged(match, poses_gt) -> LoopClosure:
-    """Compare a loop edge with the true relative pose of its two nodes."""
-    truth = np.linalg.inv(poses_gt[match.i]) @ poses_gt[match.j]
-    error = np.linalg.inv(truth) @ match.relative_pose
-    cos_angle = np.clip((np.trace(error[:3, :3]) - 1.0) / 2.0, -1.0, 1.0)
-    closure = LoopClosure(
-        match.i,
-        match.j,
-        match.relative_pose,
-        match.rmse,
-        float(np.linalg.norm(error[:3, 3])),
-        float(np.degrees(np.arccos(cos_angle))),
+def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp, config: SlamConfig):
+    """One loop query of node ``node``: (1) the old submaps near its pose,
+    verified by ICP; (2) the best scan of the matching submaps, kept as a loop
+    edge if its RMSE is below ``rmse_threshold``. None if no submap was registered."""
+    # 1. Old submaps within the (growing) search radius, verified by ICP.
+    candidates = find_loop_candidates(
+        submaps.points,
+        submaps.centres,
+        cloud,
+        pose,
+        current_submap_id=len(submaps) - 1,
+        sub_map_thresh=config.sub_map_thresh,
+        search_radius=config.loop_closure_search_radius,
+        loop_closure_threshold=config.loop_closure_threshold,
+        icp_fn=icp,
+        radius_growth=config.loop_search_growth,
     )
-    if closure.false:
-        log.warning(
-            "false loop %d -> %d: %.2f m, %.2f deg off", closure.i, closure.j, closure.error_m, closure.error_deg
-        )
-    return closure
+    if not len(candidates.tried_ids):
+        return None
+
+    # 2. The best scan-to-scan match of the matching submaps becomes the loop edge.
+    closure, best = None, float("inf")
+    if len(candidates.ids):
+        match = best_scan_registration(cloud, node, candidates, clouds, poses, config.n_scans_per_submap, icp)
+        best = match.rmse
+        if match.rmse < config.rmse_threshold:
+            log.info("loop edge %d -> %d, ICP RMSE %.3f m", match.i, match.j, match.rmse)
+            closure = Edge(match.i, match.j, match.relative_pose, match.rmse)
+    return LoopQuery(
+        node=node,
+        n_submaps=len(submaps),
+        n_eligible=candidates.n_eligible,
+        radius=candidates.radius,
+        tried_ids=candidates.tried_ids,
+        tried=candidates.tried_rmse,
+        submap_ids=candidates.ids,
+        scores=candidates.scores,
+        best_scan_rmse=best,
+        closure=closure,
+    )
 
 
 def _edges_back(clouds, relative: np.ndarray, config: SlamConfig) -> list[Edge]:
@@ -302,20 +256,17 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     return graph
 
 
-def write_run(result: SlamResult, config: Config, out_dir, map_error=None) -> Path:
-    """Write ``metrics.json``, the three TUM trajectories (one line per
-    accepted scan, its dataset index as the stamp), ``map.ply`` and the
-    ``config.toml`` used, all or nothing. ``map_error``: the map's distances
-    to the ground-truth map (:func:`helpers.evaluation.map_errors`), if known."""
-    metrics = result.metrics()
-    if map_error is not None:
-        metrics |= {"map_error_mean_m": map_error.mean, "map_error_median_m": map_error.median}
-        metrics["map_error_p95_m"] = map_error.p95
-    metrics["config"] = config_to_dict(config)
+def write_run(result: SlamResult, config: Config, out_dir, metrics: dict, poses_gt: np.ndarray) -> Path:
+    """Write ``metrics.json`` (``metrics``, from :func:`helpers.evaluation.run_metrics`,
+    and the config), the TUM trajectories of the ground truth (``poses_gt``,
+    (K, 4, 4), one per node), the odometry and the optimised poses (one line
+    per accepted scan, its dataset index as the stamp), ``map.ply`` and the
+    ``config.toml`` used, all or nothing."""
+    metrics = {**metrics, "config": config_to_dict(config)}
     with paths.atomic_dir(out_dir, "metrics.json") as work:
         (work / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         for name, poses in (
-            ("gt", result.poses_gt),
+            ("gt", poses_gt),
             ("odometry", result.poses_odometry),
             ("optimized", result.poses_optimized),
         ):

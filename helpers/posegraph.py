@@ -28,6 +28,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .errors import SlamError
+from .geometry import check_pose
 
 log = logging.getLogger(__name__)
 
@@ -50,7 +51,6 @@ KERNEL_SCALES = {"huber": 1.345, "cauchy": 2.3849}
 KERNELS = ("none", "huber", "cauchy")
 _ESTIMATORS = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
 MAX_ITERATIONS = 100
-RIGID_TOLERANCE = 1e-5
 
 _TO_GTSAM = np.array([3, 4, 5, 0, 1, 2])  # translation-first index -> rotation-first order
 
@@ -247,21 +247,6 @@ def loop_view(poses: np.ndarray, loop_pairs) -> tuple[np.ndarray, np.ndarray]:
 
 
 # -- checks and conversions -------------------------------------------------
-def check_pose(pose, what: str = "pose") -> np.ndarray:
-    """``pose`` as a float (4, 4) rigid transform, or a SlamError saying what is wrong."""
-    pose = np.asarray(pose, dtype=float)
-    if pose.shape != (4, 4):
-        raise SlamError(f"{what} must be a 4 x 4 matrix, got shape {pose.shape}")
-    if not np.all(np.isfinite(pose)):
-        raise SlamError(f"{what} contains NaN or infinite values")
-    rot = pose[:3, :3]
-    rigid = np.allclose(pose[3], [0, 0, 0, 1], atol=RIGID_TOLERANCE)
-    rigid &= np.allclose(rot.T @ rot, np.eye(3), atol=RIGID_TOLERANCE) and np.linalg.det(rot) > 0
-    if not rigid:
-        raise SlamError(f"{what} is not a rigid transform (rotation not orthonormal or last row not 0 0 0 1)")
-    return pose
-
-
 def _check_information(information) -> np.ndarray:
     info = np.asarray(information, dtype=float)
     if info.shape != (6, 6) or not np.all(np.isfinite(info)):

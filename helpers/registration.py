@@ -14,7 +14,8 @@ import open3d as o3d
 
 from .config import METRICS
 from .errors import SlamError
-from .features import check_points, to_cloud
+from .features import to_cloud
+from .geometry import check_points
 
 SAMPLE_SIZE = 3  # point pairs that fix a rigid motion
 MIN_INLIERS = 2 * SAMPLE_SIZE  # the best hypothesis must explain at least this many matches

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SlamError
-from .features import check_points, grid_average
-from .posegraph import check_pose
+from .features import grid_average
+from .geometry import check_points, check_pose, transform_points
 
 
 @dataclass(frozen=True)
@@ -51,7 +51,7 @@ def build_submap(scans, poses, align_grid_step: float) -> np.ndarray:
     for k, (scan, pose) in enumerate(zip(scans, poses, strict=True)):
         points = check_points(scan, f"scan {k} of the submap")
         pose = check_pose(pose, f"the pose of scan {k} of the submap")
-        moved.append(points @ pose[:3, :3].T + pose[:3, 3])
+        moved.append(transform_points(points, pose))
     return grid_average(np.concatenate(moved), align_grid_step)
 
 

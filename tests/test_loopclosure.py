@@ -83,8 +83,10 @@ def test_the_most_recent_submaps_are_never_candidates():
 def test_at_most_three_attempts_nearest_first():
     distances = [6.0, 2.0, 4.0, 1.0, 5.0, 3.0]
     icp = ScriptedIcp({})
-    search([[0, d, 0] for d in distances], icp)
+    found = search([[0, d, 0] for d in distances], icp)
     assert icp.ids == [3, 1, 5]  # 1 m, 2 m, 3 m
+    np.testing.assert_array_equal(found.tried_ids, [3, 1, 5])  # the search records what it tried, in order
+    assert len(found.tried_rmse) == 3 and found.n_eligible == len(distances)
 
 
 def test_at_most_three_returned_sorted_by_rmse_below_threshold():

@@ -12,6 +12,7 @@ import pytest
 
 import helpers
 from helpers.config import Config, SlamConfig, config_to_toml
+from helpers.evaluation import grade_loops, run_metrics
 from helpers.pipeline import Edge, build_pose_graph, run_slam, write_run
 from helpers.trajectory import read_tum
 from helpers.waypoints import loop_waypoints
@@ -37,13 +38,13 @@ def short_run(short_loop):
     return run_slam(short_loop, SHORT)
 
 
-def test_short_loop_is_closed_without_false_loops(short_run):
-    m = short_run.metrics()
+def test_short_loop_is_closed_without_false_loops(short_loop, short_run):
+    m = run_metrics(short_loop, short_run)
     assert m["n_loop_closures"] >= 1
     assert m["n_false_loop_closures"] == 0
     assert m["ate_rmse_optimized_m"] < m["ate_rmse_odometry_m"]
     assert m["rpe_trans_1_m"] < 0.15 and m["rpe_rot_1_deg"] < 0.1
-    for loop in short_run.loops:  # every loop edge agrees with the truth
+    for loop in grade_loops(short_loop, short_run):  # every loop edge agrees with the truth
         assert loop.error_m < 1.0 and loop.error_deg < 2.0 and loop.rmse < SHORT.rmse_threshold
 
 
@@ -57,8 +58,8 @@ def test_nodes_are_the_accepted_scans_and_anchored(short_loop, short_run):
 def test_same_inputs_same_numbers(short_loop, short_run):
     """Counts are identical; real numbers agree to 1e-9 (Open3D sums in
     parallel, so the last bits may differ from run to run)."""
-    again = run_slam(short_loop, SHORT).metrics()
-    first = short_run.metrics()
+    again = run_metrics(short_loop, run_slam(short_loop, SHORT))
+    first = run_metrics(short_loop, short_run)
     for m in (again, first):
         m.pop("runtime_s")
     assert again.keys() == first.keys()
@@ -92,15 +93,16 @@ def test_two_runs_write_the_same_metrics(short_loop_csv, tmp_path):
             assert second[key] == value, key
 
 
-def test_written_outputs(short_run, tmp_path):
-    out = write_run(short_run, Config(slam=SHORT), tmp_path / "run")
+def test_written_outputs(short_loop, short_run, tmp_path):
+    poses_gt = short_loop.poses[short_run.indices]
+    out = write_run(short_run, Config(slam=SHORT), tmp_path / "run", run_metrics(short_loop, short_run), poses_gt)
     metrics = json.loads((out / "metrics.json").read_text())
     for key in ("n_scans", "n_accepted", "n_loop_closures", "n_false_loop_closures", "ate_rmse_odometry_m"):
         assert key in metrics
     for key in ("ate_rmse_optimized_m", "rpe_trans_1_m", "rpe_rot_1_deg", "runtime_s", "config"):
         assert key in metrics
     assert metrics["config"]["slam"]["sub_map_thresh"] == 3
-    for name, poses in (("gt", short_run.poses_gt), ("optimized", short_run.poses_optimized)):
+    for name, poses in (("gt", poses_gt), ("optimized", short_run.poses_optimized)):
         stamps, read = read_tum(out / f"trajectory_{name}.txt")
         np.testing.assert_array_equal(stamps, short_run.indices)
         np.testing.assert_allclose(read[:, :3, 3], poses[:, :3, 3], atol=1e-5)
@@ -110,7 +112,7 @@ def test_written_outputs(short_run, tmp_path):
 def test_no_loop_possible_ends_with_odometry_only(short_loop):
     """With no loop possible and no edges back, the graph is the odometry chain."""
     result = run_slam(short_loop, SlamConfig(sub_map_thresh=1000, edges_back=1))
-    m = result.metrics()
+    m = run_metrics(short_loop, result)
     assert m["n_loop_closures"] == 0 and result.queries == [] and result.extra_edges == []
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
 
@@ -133,8 +135,9 @@ def test_flat_map_falls_back_instead_of_crashing(tmp_path):
 
 
 def test_a_flight_too_short_for_10_step_errors_still_reports(flight_over):
-    result = run_slam(flight_over(slice(0, 12)))  # 4 accepted scans
-    m = result.metrics()
+    flight = flight_over(slice(0, 12))
+    result = run_slam(flight)  # 4 accepted scans
+    m = run_metrics(flight, result)
     assert m["n_accepted"] == 4 and m["rpe_trans_10_m"] is None and m["rpe_rot_10_deg"] is None
     assert m["rpe_trans_1_m"] < 0.15
 

@@ -6,6 +6,10 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
 
+from ..errors import SlamError
+from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
+from ..geometry import transform_points
+from ..loopclosure import distance_flown_since
 from ..submaps import centre_scan_id
 from .style import COLORS, GREY, LIGHT, grid, xy_of
 
@@ -93,50 +97,41 @@ def candidates_figure(
     return fig
 
 
-def query_search(result, node: int) -> dict:
-    """What the loop query of ``node`` saw, rebuilt from a pipeline result:
-    the submap centres that existed then (odometry frame), how many were
-    eligible, each one's grown search radius, the submaps registered by ICP
-    (nearest first) and the scan's odometry and true positions."""
-    from .loopclosure import distance_flown_since
-
-    config = result.config
-    count = (node + 1) // config.n_scans_per_submap  # submaps built by then
-    centres = result.submaps.centres[:count]
-    position = result.poses_odometry[node][:3, 3]
-    radius = config.loop_closure_search_radius + config.loop_search_growth * distance_flown_since(centres, position)
-    n_eligible = max(0, count - config.sub_map_thresh)
-    distance = np.linalg.norm(centres[:n_eligible] - position, axis=1)
-    near = np.flatnonzero(distance < radius[:n_eligible])
-    near = near[np.argsort(distance[near], kind="stable")]
+def query_search(result, node: int, poses_gt) -> dict:
+    """What the loop query of ``node`` saw, as the pipeline recorded it
+    (:class:`helpers.pipeline.LoopQuery`): the submap centres that existed
+    then (odometry frame), how many were eligible, each one's grown search
+    radius, the submaps registered by ICP (nearest first) and those matched;
+    with the scan's odometry and true positions (``poses_gt``: (K, 4, 4), the
+    true poses of the nodes, e.g. ``dataset.poses[result.indices]``)."""
     query = next((q for q in result.queries if q.node == node), None)
-    tried = near[: len(query.tried)] if query is not None else near[:0]
-    true_centres = np.array(
-        [result.poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in result.submaps.submaps]
-    )
+    if query is None:
+        raise SlamError(f"node {node} registered no old submap: it has no loop query")
+    centres = result.submaps.centres[: query.n_submaps]
+    position = result.poses_odometry[node][:3, 3]
+    true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in result.submaps.submaps])
     return {
         "centres": centres,
-        "true_centres": true_centres[:count],
-        "n_eligible": n_eligible,
-        "radius": radius,
-        "distance": distance,
-        "tried": tried,
-        "matched": np.array([] if query is None else query.submap_ids, int),
+        "true_centres": true_centres[: query.n_submaps],
+        "n_eligible": query.n_eligible,
+        "radius": query.radius,
+        "distance": np.linalg.norm(centres[: query.n_eligible] - position, axis=1),
+        "tried": query.tried_ids,
+        "matched": np.asarray(query.submap_ids, int),
         "position": position,
-        "true_position": result.poses_gt[node][:3, 3],
+        "true_position": poses_gt[node][:3, 3],
     }
 
 
-def revisits(result, max_true_distance: float = 10.0) -> dict:
+def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
     """Every node that truly flies over an eligible old submap (true centre
-    within ``max_true_distance`` m): the distance flown since that submap,
-    how far away it looks on the odometry, and whether the node closed a loop."""
-    from .loopclosure import distance_flown_since
-
+    within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
+    the nodes): the distance flown since that submap, how far away it looks on
+    the odometry, and whether the node closed a loop."""
     config = result.config
     n = config.n_scans_per_submap
     subs = result.submaps.submaps
-    true_centres = np.array([result.poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
+    true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
     closed = {loop.j for loop in result.loops}
     rows = []
     for node in range(len(result.indices)):
@@ -144,7 +139,7 @@ def revisits(result, max_true_distance: float = 10.0) -> dict:
         n_eligible = count - config.sub_map_thresh
         if n_eligible <= 0:
             continue
-        true_distance = np.linalg.norm(true_centres[:n_eligible] - result.poses_gt[node][:3, 3], axis=1)
+        true_distance = np.linalg.norm(true_centres[:n_eligible] - poses_gt[node][:3, 3], axis=1)
         k = int(np.argmin(true_distance))
         if true_distance[k] > max_true_distance:
             continue
@@ -196,10 +191,6 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
     return fig
 
 
-def _moved(points, transform):
-    return points @ transform[:3, :3].T + transform[:3, 3]
-
-
 def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, slab: float = 1.5):
     """The moving scan (pink) over the fixed scan (cyan), in the fixed
     scan's frame, once per stage: a top view (top row, cropped to
@@ -212,7 +203,7 @@ def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, s
     )
     keep_f = np.abs(fixed[:, 1]) < half_width
     for col, (title, transform) in enumerate(stages.items()):
-        moved = _moved(moving, transform)
+        moved = transform_points(moving, transform)
         keep_m = np.abs(moved[:, 1]) < half_width
         top, side = axes[0, col], axes[1, col]
         for points, key in ((fixed[keep_f], "fixed"), (moved[keep_m], "moving")):
@@ -286,7 +277,7 @@ def queries_figure(nodes, tried, best, accepted, thresholds: dict):
     return fig
 
 
-def loop_errors_figure(error_m, error_deg, limits=(1.0, 2.0)):
+def loop_errors_figure(error_m, error_deg, limits=(FALSE_LOOP_M, FALSE_LOOP_DEG)):
     """Each accepted loop edge's error against the ground truth: translation
     (m) against rotation (deg), with the box inside which a loop counts as right."""
     fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)

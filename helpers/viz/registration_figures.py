@@ -6,6 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
+from ..geometry import transform_points
 from .parameter_figures import MATCH_COLORS, _grid
 from .style import COLORS, xy_of
 
@@ -110,7 +111,7 @@ def profile_figure(moving, fixed, stages: dict, y: float, half_width: float = 0.
     n = len(stages)
     fig, axes = plt.subplots(n, 1, figsize=(10, 2.2 * n + 0.4), sharex=True, sharey=True, constrained_layout=True)
     for ax, (title, transform) in zip(np.atleast_1d(axes), stages.items(), strict=True):
-        moved = moving @ transform[:3, :3].T + transform[:3, 3]
+        moved = transform_points(moving, transform)
         for points, key, marker in ((fixed, "fixed", "o"), (moved, "moving", "o")):
             band = points[np.abs(points[:, 1] - y) < half_width]
             ax.plot(band[:, 0], band[:, 2], marker, color=COLORS[key], ms=3.5, label=key, alpha=0.9)
