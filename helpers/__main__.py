@@ -1,4 +1,4 @@
-"""Command line: ``python -m helpers dataset|site ...``.
+"""Command line: ``python -m helpers dataset|run|site ...`` (installed: ``aerial-lidar-slam``).
 
 Errors in the input end in one line on stderr and exit code 2, never a
 traceback, and never a half-written output folder.

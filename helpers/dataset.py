@@ -24,7 +24,7 @@ from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
 
 log = logging.getLogger(__name__)
 
-DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"
+DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"  # the default flight, shipped in the package (.mat beside)
 MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the reference's 1 m voxels)
 
 
@@ -58,7 +58,7 @@ class Dataset:
 
     @cached_property
     def _scene(self):
-        """The surface's ray-casting scene, built on first use (about a second)."""
+        """The surface's ray-casting scene, built on first use."""
         return Surface.from_height_field(self.surface).raycasting_scene()
 
 
@@ -93,12 +93,11 @@ def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | No
     check_coverage(field, xyz)
     sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
-    bar = progress_bar(len(poses), "casting scans") if progress else None
+    bar = progress_bar(len(poses), "casting scans", enabled=progress)
     try:
         batch = cast_scans(Surface.from_height_field(field), poses, sensor, bar)
     finally:
-        if bar is not None:
-            bar.close()
+        bar.close()
     empty = np.flatnonzero([len(s) == 0 for s in batch.scans])
     if len(empty):
         raise SlamError(
@@ -156,13 +155,11 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
     written in a temporary folder beside it that replaces it at the end."""
     with paths.atomic_dir(out_dir, "poses_gt.txt") as work:
         (work / "scans").mkdir()
-        scans = dataset.scans
-        if progress:
-            from tqdm.auto import tqdm
-
-            scans = tqdm(scans, desc="writing scans", unit="scan", leave=False)
-        for index, scan in enumerate(scans):
+        bar = progress_bar(len(dataset), "writing scans", enabled=progress)
+        for index, scan in enumerate(dataset.scans):
             write_ply(work / "scans" / f"{index:06d}.ply", scan)
+            bar.update(1)
+        bar.close()
         write_tum(work / "poses_gt.txt", dataset.poses)
         write_ply(work / "map_gt.ply", dataset.map_points)
         (work / "sensor.toml").write_text(_sensor_toml(dataset.sensor))

@@ -62,10 +62,10 @@ def fpfh(points, neighbors: int) -> np.ndarray:
     Normals come from the ``neighbors`` nearest points and point up (+z); the
     histograms use the same ``neighbors`` nearest points.
 
-    Cost (measured, 5.8k points, 60 neighbours): Open3D's FPFH is the
-    largest part of a scan's preparation. A numpy version sharing one
-    neighbour query between normals, SPFH and FPFH reproduced Open3D's
-    descriptors but took 2-3 times its CPU time, so Open3D's is kept.
+    Open3D's FPFH is the largest part of a scan's preparation; a numpy
+    version sharing one neighbour query between normals, SPFH and FPFH
+    reproduced its descriptors but was slower (README, measured figures),
+    so Open3D's is kept.
     """
     points = check_points(points, "the cloud to describe")
     if neighbors < 3:

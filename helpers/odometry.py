@@ -11,11 +11,9 @@ and that preparation serves twice, as the moving scan of one pair and the
 fixed scan of the next; per pair only matching, the robust fit and the ICP
 iterations remain. The ICP stops when an iteration changes its RMSE by less
 than ``ICP_TOLERANCE`` metres and its inlier fraction by less than that
-fraction. Measured on 19 pairs spread over the default flight, against
-1e-6: ICP CPU time 128 -> 51 ms a pair (a tighter criterion sometimes
-oscillates by a few inliers until the iteration cap), the result moves by
-1.5 mm on average (at most 1 cm), and the error against the ground truth
-is unchanged (3.1 cm RMS point displacement either way).
+fraction (a tighter criterion sometimes oscillates by a few inliers until
+the iteration cap); what this tolerance costs and changes is measured by
+``benchmarks/bench_registration.py`` and kept in the README.
 """
 
 from __future__ import annotations
@@ -175,7 +173,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = 
     n_matches, n_inliers, rmse, fallbacks = [], [], [], []
     timings = {stage: np.zeros(len(indices)) for stage in STAGES}
     previous, motion = None, None
-    bar = progress_bar(len(indices), "odometry") if progress else None
+    bar = progress_bar(len(indices), "odometry", enabled=progress)
     for k, index in enumerate(indices):
         # 1. Downsample the accepted scan and extract its FPFH descriptors.
         current = prepare(check_points(scans[index], f"scan {index}"), config)
@@ -197,10 +195,8 @@ def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = 
             n_inliers.append(int(pair.inliers.sum()))
             rmse.append(pair.rmse)
         previous = current
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
+        bar.update(1)
+    bar.close()
     return OdometryResult(
         indices=indices,
         poses=np.array(poses),

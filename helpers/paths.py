@@ -1,4 +1,11 @@
-"""Where the project keeps its data and its caches."""
+"""Where the package keeps its data and its caches.
+
+The default flight ships inside the package (``helpers/data/``, read through
+:mod:`importlib.resources`), so an installed package needs no checkout. Caches
+(the default run, unpacked map tiles) go to :func:`cache_dir`:
+``$HELPERS_CACHE`` if set, else ``$XDG_CACHE_HOME/aerial-lidar-slam``
+(``~/.cache/aerial-lidar-slam`` by default). Deleting that folder is always safe.
+"""
 
 from __future__ import annotations
 
@@ -7,23 +14,24 @@ import shutil
 import tempfile
 from collections.abc import Callable
 from contextlib import contextmanager
+from importlib import resources
 from pathlib import Path
 from typing import BinaryIO
 
 from .errors import SlamError
 
-REPO = Path(__file__).resolve().parents[1]
-DATA = REPO / "data"
+DATA = Path(resources.files("helpers").joinpath("data"))  # files shipped in the package
+CACHE_VARIABLE = "HELPERS_CACHE"
+CACHE_NAME = "aerial-lidar-slam"  # the folder under the user's cache folder
 
 
 def cache_dir() -> Path:
-    """The cache folder: ``$HELPERS_CACHE`` if set, else ``data/cache`` (git-ignored)."""
-    return Path(os.environ.get("HELPERS_CACHE", DATA / "cache"))
-
-
-def shared_data(name: str) -> Path:
-    """A file of the real data kept beside the repository (``../shared/data``)."""
-    return REPO.parent / "shared" / "data" / name
+    """The cache folder: ``$HELPERS_CACHE`` if set, else
+    ``$XDG_CACHE_HOME/aerial-lidar-slam`` (``~/.cache/aerial-lidar-slam``)."""
+    if os.environ.get(CACHE_VARIABLE):
+        return Path(os.environ[CACHE_VARIABLE])
+    user_cache = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(user_cache) / CACHE_NAME
 
 
 @contextmanager

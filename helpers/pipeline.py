@@ -32,12 +32,7 @@ from .trajectory import write_tum
 
 log = logging.getLogger(__name__)
 
-# The modules whose code decides a run's numbers: the cache of default_run
-# is keyed by their source (figure and report modules are left out).
-RUN_MODULES = (
-    "config", "dataset", "features", "loopclosure", "mapio", "odometry", "pipeline",
-    "posegraph", "registration", "scene", "sensor", "submaps", "waypoints",
-)  # fmt: skip
+PICTURE_PACKAGES = ("viz", "site")  # subpackages that draw or publish, never change a run's numbers
 
 
 @dataclass(frozen=True)
@@ -276,16 +271,27 @@ def write_run(result: SlamResult, config: Config, out_dir, metrics: dict, poses_
     return Path(out_dir)
 
 
+def core_fingerprint() -> bytes:
+    """The SLAM core's files (every file of the package outside
+    :data:`PICTURE_PACKAGES`: code and the shipped flight), names and contents,
+    in a fixed order: what decides a run's numbers."""
+    root = Path(__file__).parent
+    digest = hashlib.sha256()
+    for path in sorted(root.rglob("*")):
+        relative = path.relative_to(root)
+        if path.is_file() and relative.parts[0] not in PICTURE_PACKAGES and "__pycache__" not in relative.parts:
+            digest.update(relative.as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    return digest.digest()
+
+
 def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
     """The dataset and the SLAM result of the embedded default, computed
-    once and then read from ``data/cache`` (keyed by the configuration and
-    the package's source, so any change recomputes; so does a damaged file).
-    Notebooks 4 to 7 start from here instead of from hidden state; two of them
-    computing it at once each write a whole file."""
+    once and then read from :func:`helpers.paths.cache_dir` (keyed by the
+    configuration and the core package's files, so any change recomputes; so
+    does a damaged file). Notebooks 4 to 7 start from here instead of from
+    hidden state; two of them computing it at once each write a whole file."""
     config = config or Config()
-    here = Path(__file__).parent
-    source = b"".join((here / f"{name}.py").read_bytes() for name in RUN_MODULES)
-    key = hashlib.sha256(config_to_toml(config).encode() + source).hexdigest()[:16]
+    key = hashlib.sha256(config_to_toml(config).encode() + core_fingerprint()).hexdigest()[:16]
     cache = paths.cache_dir() / f"slam-{key}.pkl"
     dataset = create_dataset(sensor=config.sensor)
     try:

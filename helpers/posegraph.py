@@ -237,15 +237,6 @@ def information_from_sigmas(sigmas) -> np.ndarray:
     return np.diag(sigmas**-2.0)
 
 
-def loop_view(poses: np.ndarray, loop_pairs) -> tuple[np.ndarray, np.ndarray]:
-    """For plotting: (K, 3) positions and (L, 2, 3) segments, one per loop pair (i, j)."""
-    positions = np.asarray(poses, dtype=float)[:, :3, 3]
-    pairs = np.asarray(loop_pairs, dtype=int).reshape(-1, 2)
-    if pairs.size and (pairs.min() < 0 or pairs.max() >= len(positions)):
-        raise SlamError(f"a loop pair refers to a node outside 0..{len(positions) - 1}")
-    return positions, positions[pairs]
-
-
 # -- checks and conversions -------------------------------------------------
 def _check_information(information) -> np.ndarray:
     info = np.asarray(information, dtype=float)

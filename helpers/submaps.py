@@ -115,11 +115,3 @@ class SubmapIndex:
     def centres(self) -> np.ndarray:
         """(K, 3) centre positions, one row per submap."""
         return np.array([s.centre for s in self.submaps]).reshape(-1, 3)
-
-
-def build_submaps(scans, poses, n_scans_per_submap: int = 3, align_grid_step: float = 1.2) -> SubmapIndex:
-    """All the submaps of a sequence of accepted scans at once (leftover scans make no submap)."""
-    index = SubmapIndex(n_scans_per_submap, align_grid_step)
-    for scan, pose in zip(scans, poses, strict=True):
-        index.add_scan(scan, pose)
-    return index

@@ -73,17 +73,6 @@ def read_waypoints(path: str | Path) -> np.ndarray:
     return points
 
 
-def write_waypoints(path: str | Path, xy: np.ndarray) -> None:
-    """Write waypoints as ``.csv`` (header ``x,y``) or ``.mat`` (``gTruthTraj``)."""
-    path = Path(path)
-    if path.suffix.lower() == ".mat":
-        from scipy.io import savemat
-
-        savemat(path, {"gTruthTraj": np.asarray(xy, np.float64)}, do_compression=True)
-    else:
-        np.savetxt(path, xy, fmt="%.4f", delimiter=",", header="x,y", comments="")
-
-
 def _read_mat(path: Path) -> np.ndarray:
     from scipy.io import loadmat
 

@@ -6,7 +6,6 @@ import pytest
 import helpers
 from helpers.config import SensorConfig
 from helpers.errors import SlamError
-from helpers.plyio import read_ply
 from helpers.scene import default_scene
 from helpers.trajectory import read_tum
 
@@ -92,7 +91,7 @@ def test_write_dataset_layout_and_round_trip(short_flight, tmp_path):
     out = helpers.write_dataset(data, tmp_path / "out")
     scans = sorted((out / "scans").glob("*.ply"))
     assert [p.name for p in scans[:2]] == ["000000.ply", "000001.ply"] and len(scans) == len(data)
-    np.testing.assert_array_equal(read_ply(scans[7]), data.scans[7])
+    np.testing.assert_array_equal(read_ply(scans[7]), data.scans[7])  # exactly, float64
     stamps, poses = read_tum(out / "poses_gt.txt")
     np.testing.assert_array_equal(stamps, np.arange(len(data)))
     np.testing.assert_allclose(poses, data.poses, atol=1e-6)
@@ -143,3 +142,10 @@ def test_flight_off_the_map_is_refused(tmp_path):
 def test_scans_beyond_max_range_are_reported_empty(short_flight):
     with pytest.raises(SlamError, match=r"40 of 40 scans came back empty"):
         helpers.create_dataset(waypoints_path=short_flight, sensor=SensorConfig(max_range=100.0))
+
+
+def read_ply(path):
+    """The (N, 3) points of a PLY file, read by Open3D's tensor reader, as float64."""
+    import open3d as o3d
+
+    return o3d.t.io.read_point_cloud(str(path)).point.positions.numpy().astype(np.float64)

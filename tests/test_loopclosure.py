@@ -15,7 +15,7 @@ from helpers.loopclosure import (
     icp_with,
 )
 from helpers.posegraph import PoseGraph
-from helpers.submaps import build_submaps
+from helpers.submaps import SubmapIndex
 
 RADIUS = 7.9  # m, the reference's loopClosureSearchRadius
 THRESHOLD = 0.6  # the reference's loopClosureThreshold and rmseThreshold
@@ -184,7 +184,9 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     rng = np.random.default_rng(3)
     truth = np.array([pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)])
     scans = [scan_at(p, rng) for p in truth]
-    index = build_submaps(scans, truth, n_scans_per_submap=3, align_grid_step=0.5)
+    index = SubmapIndex(n_scans_per_submap=3, align_grid_step=0.5)
+    for scan, true_pose in zip(scans, truth, strict=True):
+        index.add_scan(scan, true_pose)
     revisit = pose(2.0, (3.5, 1.5, 50))  # back over scans 1-2, heading turned
     drifted = pose(2.0 + np.radians(2), (5.0, 0.5, 50.5))  # the odometry's guess: 1.8 m and 2 deg off
     scan = scan_at(revisit, rng)

@@ -70,3 +70,32 @@ def test_metrics_refuse_bad_input():
     bad[2, 0, 3] = np.nan
     with pytest.raises(SlamError, match="NaN"):
         ate(bad, gt)
+
+
+@pytest.mark.parametrize("delta", [1, 3])
+def test_ate_and_rpe_agree_with_evo(delta):
+    """evo's APE (translation part, no alignment) and RPE (every pair ``delta``
+    frames apart) give the same per-pose errors on a noisy ring."""
+    metrics = pytest.importorskip("evo.core.metrics", reason="evo (a test dependency) is not installed")
+    from evo.core.trajectory import PosePath3D
+
+    gt = _circle(n=40)
+    rng = np.random.default_rng(3)
+    est = gt.copy()
+    est[:, :3, 3] += rng.normal(scale=0.2, size=(40, 3))
+    est[:, :3, :3] = Rotation.from_rotvec(rng.normal(scale=0.02, size=(40, 3))).as_matrix() @ est[:, :3, :3]
+    pair = (PosePath3D(poses_se3=list(gt)), PosePath3D(poses_se3=list(est)))
+
+    ape = metrics.APE(metrics.PoseRelation.translation_part)
+    ape.process_data(pair)
+    np.testing.assert_allclose(ate(est, gt).errors, ape.error, atol=1e-9)
+    assert ate(est, gt).rmse == pytest.approx(ape.get_statistic(metrics.StatisticsType.rmse), rel=1e-9)
+
+    ours = rpe(est, gt, delta)
+    for relation, errors in (
+        (metrics.PoseRelation.translation_part, ours.translation.errors),
+        (metrics.PoseRelation.rotation_angle_deg, ours.rotation.errors),
+    ):
+        theirs = metrics.RPE(relation, delta=delta, delta_unit=metrics.Unit.frames, all_pairs=True)
+        theirs.process_data(pair)
+        np.testing.assert_allclose(errors, theirs.error, atol=1e-6)

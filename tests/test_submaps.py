@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.submaps import SubmapIndex, build_submap, build_submaps, centre_scan_id, scan_ids_of
+from helpers.submaps import SubmapIndex, build_submap, centre_scan_id, scan_ids_of
 
 STEP = 1.2  # m, the reference's alignGridStep
 
@@ -69,7 +69,9 @@ def test_index_groups_scans_and_takes_the_centre_pose():
     np.testing.assert_allclose(index.submaps[1].pose, poses[4])
     np.testing.assert_allclose(index.centres, [[10, 0, 700], [40, 0, 700]])
     np.testing.assert_allclose(index.points[0], build_submap(scans[:3], poses[:3], STEP))
-    batch = build_submaps(scans, poses, 4, STEP)
+    batch = SubmapIndex(4, STEP)
+    for scan, p in zip(scans, poses, strict=True):
+        batch.add_scan(scan, p)
     assert len(batch) == 2
     np.testing.assert_allclose(batch.centres, [[10, 0, 700], [50, 0, 700]])  # scans 1 and 5
 

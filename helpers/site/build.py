@@ -18,7 +18,7 @@ from ..errors import SlamError
 from ..viz.display import KERNEL_ENVIRONMENT
 
 log = logging.getLogger(__name__)
-NOTEBOOKS = paths.REPO / "notebooks"
+NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"  # the checkout's: notebooks are not installed
 TIMEOUT_S = 1800  # per notebook
 TEMPLATE = Path(__file__).parent / "templates" / "offline.html.j2"
 MATHJAX_DIR = "mathjax"  # the site's copy of MathJax 2.7, beside the pages
