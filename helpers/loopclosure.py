@@ -8,7 +8,7 @@ centres are in the map frame (:mod:`helpers.submaps`).
 
 ICP is injected as ``icp_fn(moving, fixed, init) -> (T, rmse)``, where ``T``
 carries ``moving`` onto ``fixed`` starting from ``init``; :func:`icp_with`
-builds one from :func:`helpers.registration.refine_icp`, and tests pass a
+builds one from :func:`helpers.icp.refine_icp`, and tests pass a
 stub.
 """
 
@@ -67,15 +67,15 @@ class LoopMatch:
 
 
 def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP_ITERATIONS) -> IcpFn:
-    """An ``icp_fn``: :func:`helpers.registration.refine_icp` with these
+    """An ``icp_fn``: :func:`helpers.icp.refine_icp` with these
     settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
 
     The same scans and submaps are registered again and again, so each cloud
-    is made ready for ICP once (:func:`helpers.registration.icp_cloud`) and
+    is made ready for ICP once (:func:`helpers.icp.icp_cloud`) and
     its normals serve the score too.
     """
+    from .icp import icp_cloud, refine_icp
     from .odometry import ICP_TOLERANCE
-    from .registration import icp_cloud, refine_icp
 
     prepared = {}  # id(points) -> (points, IcpCloud); holding points keeps the id unique
     with_normals = metric if metric != "point-to-point" else "point-to-plane"  # the score needs normals

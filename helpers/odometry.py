@@ -28,8 +28,9 @@ from .config import SlamConfig
 from .errors import SlamError
 from .features import fpfh, grid_average, match_features
 from .geometry import check_points
+from .icp import IcpCloud, icp_cloud, refine_icp
 from .progress import progress_bar
-from .registration import IcpCloud, estimate_rigid_msac, icp_cloud, refine_icp
+from .registration import estimate_rigid_msac
 
 log = logging.getLogger(__name__)
 

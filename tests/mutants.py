@@ -39,7 +39,7 @@ MUTANTS = {
     ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
-        "helpers/registration.py",
+        "helpers/icp.py",
         "    transform = np.array(result.transformation)\n",
         "    transform = init.copy()\n",
     ),

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.registration import _trials_needed, estimate_rigid_msac, icp_cloud, icp_rmse, kabsch, refine_icp
+from helpers.icp import icp_cloud, icp_rmse, refine_icp
+from helpers.registration import _trials_needed, estimate_rigid_msac, kabsch
 
 WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
 
