@@ -128,8 +128,9 @@ def _locally_optimised(transform: np.ndarray, moving: np.ndarray, fixed: np.ndar
         refit_cost, refit_inliers = np.minimum(squared, limit).sum(), squared < limit
         if not refit_cost < cost:
             break
-        transform, cost, changed, inliers = refit, refit_cost, refit_inliers != inliers, refit_inliers
-        if not changed.any():
+        converged = np.array_equal(refit_inliers, inliers)
+        transform, cost, inliers = refit, refit_cost, refit_inliers
+        if converged:
             break
     return transform, cost, inliers
 

@@ -33,7 +33,9 @@ def test_odometry_meets_the_relative_error_bar(flight, odometry):
 
 
 STEP_BOUND_M = 0.3  # no step of the whole default flight is further off (benchmarks/bench_stability.py: 0.27 m)
-NUDGE_BOUND_M = 0.05  # nor moved further by the nudge (the whole flight: at most 3.3 cm)
+# A step that flips between success and failure moves by metres; ICP stopping at another iteration moves it by
+# centimetres (the whole flight, seeds 0-2: at most 8 cm).
+NUDGE_BOUND_M = 0.15
 
 
 @pytest.mark.parametrize("noise_seed", [0, 1, 2])
