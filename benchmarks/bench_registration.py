@@ -20,17 +20,18 @@ import numpy as np
 import open3d as o3d
 
 from helpers import create_dataset
-from helpers.config import SlamConfig
+from helpers.config import Config
 from helpers.features import to_cloud
 from helpers.metrics import ate, rpe
-from helpers.odometry import ICP_TOLERANCE, STAGES, prepare, run_odometry
+from helpers.odometry import STAGES, prepare, run_odometry
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pairs", type=int, default=40, help="pairs timed with Open3D's RANSAC (default 40)")
     args = parser.parse_args()
-    config = SlamConfig()
+    config = Config()
+    fit = config.registration
     data = create_dataset()
 
     # 1. Our pipeline over every accepted scan.
@@ -39,7 +40,7 @@ def main() -> None:
     wall = time.perf_counter() - start
     steps = slice(1, None)  # the first accepted scan is only downsampled and described
     print(f"{len(result.indices)} accepted scans of {len(data)}, odometry {wall:.1f} s")
-    print(f"ICP grid {config.icp_grid_step} m, ICP tolerance {ICP_TOLERANCE} m")
+    print(f"ICP grid {fit.icp_grid_step} m, ICP tolerance {fit.icp_tolerance} m")
     print("per accepted scan, ms (mean / median / 95th percentile):")
     total = sum(result.timings[stage][steps] for stage in STAGES)
     for name, values in [*((s, result.timings[s][steps]) for s in STAGES), ("total", total)]:
@@ -66,7 +67,7 @@ def main() -> None:
         )
         f_moving, f_fixed = reg.Feature(), reg.Feature()
         f_moving.data, f_fixed.data = moving.features.T.copy(), fixed.features.T.copy()
-        o3d.utility.random.seed(config.seed)
+        o3d.utility.random.seed(fit.seed)
         start = time.perf_counter()
         ransac = reg.registration_ransac_based_on_feature_matching(
             to_cloud(moving.points),
@@ -74,18 +75,18 @@ def main() -> None:
             f_moving,
             f_fixed,
             True,
-            config.max_distance,
+            fit.max_distance,
             reg.TransformationEstimationPointToPoint(False),
             3,
-            [reg.CorrespondenceCheckerBasedOnDistance(config.max_distance)],
-            reg.RANSACConvergenceCriteria(config.max_num_trials, 0.999),
+            [reg.CorrespondenceCheckerBasedOnDistance(fit.max_distance)],
+            reg.RANSACConvergenceCriteria(fit.max_num_trials, 0.999),
         )
         theirs.append(1000 * (time.perf_counter() - start))
         ours.append(result.timings["match"][k] + result.timings["msac"][k])
         truth = np.linalg.inv(gt[k - 1]) @ gt[k]
         errors.append(np.linalg.norm((np.linalg.inv(truth) @ np.asarray(ransac.transformation))[:3, 3]))
     print(
-        f"Open3D RANSAC (mutual filter, {config.max_num_trials} trials) on {pairs} pairs: "
+        f"Open3D RANSAC (mutual filter, {fit.max_num_trials} trials) on {pairs} pairs: "
         f"{np.mean(theirs):.1f} ms a pair (ours, match + MSAC: {np.mean(ours):.1f} ms); "
         f"coarse translation error median {np.median(errors):.2f} m, max {np.max(errors):.2f} m"
     )

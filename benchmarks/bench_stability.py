@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 import helpers
-from helpers.config import SensorConfig, SlamConfig
+from helpers.config import Config, SensorConfig
 from helpers.odometry import run_odometry
 
 
@@ -29,7 +29,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--nudge", type=float, default=1e-6, help="metres of uniform jitter added to every point")
     args = parser.parse_args()
-    config = SlamConfig()
+    config = Config()
     print(f"{'seed':>4} {'steps':>5} {'median':>8} {'p95':>8} {'max':>8} {'fallbacks':>9} {'moved max':>10} {'s':>5}")
     for seed in args.seeds:
         data = helpers.create_dataset(sensor=dataclasses.replace(SensorConfig(), seed=seed))

@@ -10,7 +10,8 @@ Importing the package sets nothing (no environment variable, no matplotlib
 back end); pictures live in :mod:`helpers.viz`, the site in :mod:`helpers.site`.
 """
 
-from .config import Config, SensorConfig, load_config
+from .config import Config, SensorConfig
+from .configfile import load_config
 from .dataset import DEFAULT_WAYPOINTS, Dataset, create_dataset, write_dataset
 from .errors import SlamError
 from .scene import default_scene
@@ -28,4 +29,4 @@ __all__ = [
     "read_waypoints",
     "write_dataset",
 ]
-__version__ = "0.1.0"
+__version__ = "0.2.0"

@@ -56,11 +56,11 @@ def main(argv=None) -> int:
 def _map_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", help=".las, .laz or .tar.gz holding one (default: the embedded scene)")
     parser.add_argument("--waypoints", help=".mat with gTruthTraj or .csv of x,y[,z] (default: a loop)")
-    parser.add_argument("--config", help="TOML file with [sensor] and [slam] tables")
+    parser.add_argument("--config", help="TOML file with a table per stage: [sensor], [features], [registration], ...")
 
 
 def _dataset(args) -> int:
-    from .config import load_config
+    from .configfile import load_config
     from .dataset import create_dataset, write_dataset
 
     config = load_config(args.config)
@@ -76,20 +76,21 @@ def _dataset(args) -> int:
 
 
 def _run(args) -> int:
-    from .config import load_config
+    from .configfile import load_config
     from .dataset import create_dataset
     from .evaluation import map_errors, run_metrics
-    from .pipeline import run_slam, write_run
+    from .output import write_run
+    from .pipeline import run_slam
 
     config = load_config(args.config)
     start = time.perf_counter()
     interactive = sys.stderr.isatty()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
     created = time.perf_counter() - start
-    result = run_slam(data, config.slam, progress=interactive)
+    result = run_slam(data, config, progress=interactive)
     result.runtime_s = {"dataset": created, **result.runtime_s}
     m = run_metrics(data, result, map_errors(result.map_points, data.map_points))
-    out = write_run(result, config, args.out, m, data.poses[result.indices])
+    out = write_run(result, args.out, m, data.poses[result.indices])
     print(
         f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
         f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "

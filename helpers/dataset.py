@@ -11,7 +11,8 @@ from pathlib import Path
 import numpy as np
 
 from . import paths
-from .config import SensorConfig
+from .config import Config, SensorConfig
+from .configfile import config_to_toml
 from .errors import SlamError
 from .geometry import transform_points
 from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
@@ -162,12 +163,6 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
         bar.close()
         write_tum(work / "poses_gt.txt", dataset.poses)
         write_ply(work / "map_gt.ply", dataset.map_points)
-        (work / "sensor.toml").write_text(_sensor_toml(dataset.sensor))
+        sensor = config_to_toml(Config(sensor=dataset.sensor), ("sensor",), "the sensor that produced this dataset")
+        (work / "sensor.toml").write_text(sensor)
     return Path(out_dir)
-
-
-def _sensor_toml(sensor: SensorConfig) -> str:
-    lines = ["# the sensor that produced this dataset", "[sensor]"]
-    for key, value in vars(sensor).items():
-        lines.append(f"{key} = {list(value) if isinstance(value, tuple) else value!r}")
-    return "\n".join(lines) + "\n"

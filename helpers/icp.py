@@ -18,8 +18,6 @@ from .features import to_cloud
 from .geometry import check_points
 from .registration import SAMPLE_SIZE
 
-ICP_MAX_ITERATIONS = 30  # ICP stops after this many iterations ...
-ICP_RELATIVE_CHANGE = 1e-6  # ... or when fitness and RMSE change by less than this fraction
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
 GICP_EPSILON = 1e-3  # generalized ICP: a point's covariance is this thin across its plane (Open3D's default)
 
@@ -85,10 +83,10 @@ def refine_icp(
     moving,
     fixed,
     init,
-    metric: str = "plane-to-plane",
-    inlier_distance: float = 3.0,
-    max_iterations: int = ICP_MAX_ITERATIONS,
-    tolerance: float = ICP_RELATIVE_CHANGE,
+    metric: str,
+    inlier_distance: float,
+    max_iterations: int,
+    tolerance: float,
 ) -> tuple[np.ndarray, float]:
     """Refine ``init`` (4 x 4, moving -> fixed) by ICP; returns ``(T, rmse)``.
 
@@ -100,7 +98,7 @@ def refine_icp(
     ignored. ICP stops after ``max_iterations`` or when, from one iteration to
     the next, the inlier fraction changes by less than ``tolerance`` and the
     RMSE by less than ``tolerance`` metres (Open3D compares the plain
-    differences).
+    differences). The pipeline takes all four from ``[registration]``.
 
     ``rmse`` (m) is always the same measure, whatever the metric: the root
     mean square distance from each moved moving point to its nearest fixed

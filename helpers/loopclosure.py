@@ -21,20 +21,13 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .config import LoopClosureConfig
 from .errors import SlamError
 from .geometry import check_points, check_pose, transform_points
 from .submaps import scan_ids_of
 
 log = logging.getLogger(__name__)
 
-LOOP_ICP_ITERATIONS = 50  # the reference's ICP iterations when checking a submap
-MAX_ATTEMPTS = 3  # submaps registered at most, nearest first
-MAX_RETURNED = 3  # matching submaps returned at most, best first
-# Odometry drift grows with the distance flown, so an old place can look
-# farther away than it is. The search radius grows by this fraction of the
-# distance flown since the submap (2 % is a common lidar-odometry drift rate);
-# 0 keeps the reference's fixed radius.
-RADIUS_GROWTH = 0.02
 SURFACE_NEIGHBORS = 20  # neighbours of the normals that surface_rmse measures along
 
 IcpFn = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
@@ -66,7 +59,7 @@ class LoopMatch:
     rmse: float
 
 
-def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP_ITERATIONS) -> IcpFn:
+def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance: float) -> IcpFn:
     """An ``icp_fn``: :func:`helpers.icp.refine_icp` with these
     settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
 
@@ -75,7 +68,6 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP
     its normals serve the score too.
     """
     from .icp import icp_cloud, refine_icp
-    from .odometry import ICP_TOLERANCE
 
     prepared = {}  # id(points) -> (points, IcpCloud); holding points keeps the id unique
     with_normals = metric if metric != "point-to-point" else "point-to-plane"  # the score needs normals
@@ -89,7 +81,7 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int = LOOP_ICP
         source, target = ready(moving), ready(fixed)
         if metric == "point-to-point":
             source, target = moving, fixed
-        transform, _ = refine_icp(source, target, init, metric, inlier_distance, max_iterations, ICP_TOLERANCE)
+        transform, _ = refine_icp(source, target, init, metric, inlier_distance, max_iterations, tolerance)
         normals = np.asarray(ready(fixed).cloud.normals)
         return transform, surface_rmse(moving, fixed, transform, inlier_distance, normals)
 
@@ -143,13 +135,8 @@ def find_loop_candidates(
     scan_points: np.ndarray,
     scan_pose: np.ndarray,
     current_submap_id: int,
-    sub_map_thresh: int,
-    search_radius: float,
-    loop_closure_threshold: float,
     icp_fn: IcpFn,
-    max_attempts: int = MAX_ATTEMPTS,
-    max_returned: int = MAX_RETURNED,
-    radius_growth: float = RADIUS_GROWTH,
+    settings: LoopClosureConfig,
 ) -> LoopCandidates:
     """Old submaps that the current scan registers onto, as the reference helper does.
 
@@ -157,25 +144,29 @@ def find_loop_candidates(
        (``current_submap_id`` is the newest built submap; the ``sub_map_thresh``
        newest are skipped).
     2. Keep those whose centre is nearer than the radius to the scan's
-       position. The radius is ``search_radius + radius_growth * d``, with
-       ``d`` the distance flown since the submap (:func:`distance_flown_since`);
-       ``radius_growth=0`` is the reference's fixed radius.
+       position. The radius is ``loop_closure_search_radius + loop_search_growth * d``,
+       with ``d`` the distance flown since the submap (:func:`distance_flown_since`):
+       odometry drift grows with the distance flown, so an old place can look
+       farther away than it is. A growth of 0 is the reference's fixed radius.
     3. Sort them by distance and register the scan to at most ``max_attempts``
        of them: ``icp_fn(scan_points, submap, scan_pose)``.
     4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
        ``max_returned``, lowest RMSE first.
+
+    The names in quotes are the fields of ``settings``.
     """
     centres = np.asarray(submap_centres, dtype=float).reshape(-1, 3)
     scan_points = check_points(scan_points, "the current scan")
     scan_pose = check_pose(scan_pose, "the current scan pose")
-    _check_search(submaps, centres, current_submap_id, sub_map_thresh, search_radius, radius_growth)
-    _check_counts(loop_closure_threshold, max_attempts, max_returned)
+    _check_search(submaps, centres, current_submap_id)
+    sub_map_thresh, max_attempts = settings.sub_map_thresh, settings.max_attempts
 
     # 1.-2. eligible submaps within the (growing) radius, nearest first
     position = scan_pose[:3, 3]
     eligible = centres[: max(0, current_submap_id - sub_map_thresh + 1)]
     distance = np.linalg.norm(eligible - position, axis=1)
-    radius = search_radius + radius_growth * distance_flown_since(centres[: current_submap_id + 1], position)
+    flown = distance_flown_since(centres[: current_submap_id + 1], position)
+    radius = settings.loop_closure_search_radius + settings.loop_search_growth * flown
     near = np.flatnonzero(distance < radius[: len(eligible)])
     near = near[np.argsort(distance[near], kind="stable")]
 
@@ -185,12 +176,12 @@ def find_loop_candidates(
         pose, rmse = icp_fn(scan_points, submaps[submap_id], scan_pose)
         log.debug("submap %d at %.1f m: ICP RMSE %.3f m", submap_id, distance[submap_id], rmse)
         tried.append(rmse)
-        if rmse < loop_closure_threshold:
+        if rmse < settings.loop_closure_threshold:
             found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
 
     # 4. best first
     found.sort(key=lambda item: item[0])
-    found = found[:max_returned]
+    found = found[: settings.max_returned]
     return LoopCandidates(
         np.array([f[1] for f in found], dtype=int),
         np.array([f[0] for f in found], dtype=float),
@@ -257,23 +248,10 @@ def best_scan_registration(
     return best
 
 
-def _check_search(submaps, centres, current_submap_id, sub_map_thresh, search_radius, radius_growth) -> None:
+def _check_search(submaps, centres, current_submap_id) -> None:
     if not np.all(np.isfinite(centres)):
         raise SlamError("the submap centres contain NaN or infinite values")
     if not 0 <= current_submap_id < min(len(centres), len(submaps)):
         raise SlamError(
             f"current_submap_id {current_submap_id} is not among the {min(len(centres), len(submaps))} submaps given"
         )
-    if sub_map_thresh < 0:
-        raise SlamError(f"sub_map_thresh must be zero or positive, got {sub_map_thresh}")
-    if not (np.isfinite(search_radius) and search_radius > 0):
-        raise SlamError(f"the search radius must be a positive number of metres, got {search_radius}")
-    if not (np.isfinite(radius_growth) and radius_growth >= 0):
-        raise SlamError(f"radius_growth must be zero or a positive fraction, got {radius_growth}")
-
-
-def _check_counts(loop_closure_threshold, max_attempts, max_returned) -> None:
-    if not (np.isfinite(loop_closure_threshold) and loop_closure_threshold > 0):
-        raise SlamError(f"the loop closure threshold must be a positive RMSE, got {loop_closure_threshold}")
-    if max_attempts < 1 or max_returned < 1:
-        raise SlamError(f"max_attempts and max_returned must be at least 1, got {max_attempts} and {max_returned}")

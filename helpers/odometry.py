@@ -10,8 +10,8 @@ described, and its ICP cloud given normals and generalized-ICP covariances)
 and that preparation serves twice, as the moving scan of one pair and the
 fixed scan of the next; per pair only matching, the robust fit and the ICP
 iterations remain. The ICP stops when an iteration changes its RMSE by less
-than ``ICP_TOLERANCE`` metres and its inlier fraction by less than that
-fraction (a tighter criterion sometimes oscillates by a few inliers until
+than ``[registration] icp_tolerance`` metres and its inlier fraction by less
+than that fraction (a tighter criterion sometimes oscillates by a few inliers until
 the iteration cap); what this tolerance costs and changes is measured by
 ``benchmarks/bench_registration.py`` and kept in the README.
 """
@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import SlamConfig
+from .config import Config, RegistrationConfig
 from .errors import SlamError
 from .features import fpfh, grid_average, match_features
 from .geometry import check_points
@@ -34,7 +34,6 @@ from .registration import estimate_rigid_msac
 
 log = logging.getLogger(__name__)
 
-ICP_TOLERANCE = 1e-3  # m (and inlier fraction): ICP stops when an iteration changes its RMSE by less
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
 
 
@@ -78,36 +77,39 @@ class OdometryResult:
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
 
 
-def prepare(scan: np.ndarray, config: SlamConfig) -> Frame:
+def prepare(scan: np.ndarray, config: Config) -> Frame:
     """Downsample one scan, describe it and make its ICP cloud ready.
 
     ``timings`` has the ms of ``downsample``, ``fpfh`` and ``icp`` (the ICP
     cloud's normals and covariances, paid once per scan).
     """
+    features, registration = config.features, config.registration
     timings = {}
     start = time.perf_counter()
-    points = grid_average(scan, config.grid_step)
-    icp_points = grid_average(scan, config.icp_grid_step) if config.icp_grid_step > 0 else points
+    points = grid_average(scan, features.grid_step)
+    icp_step = registration.icp_grid_step
+    icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
     timings["downsample"] = _ms(start)
     start = time.perf_counter()
-    features = fpfh(points, config.neighbors)
+    descriptors = fpfh(points, features.neighbors)
     timings["fpfh"] = _ms(start)
     start = time.perf_counter()
-    icp = icp_cloud(icp_points, config.metric)
+    icp = icp_cloud(icp_points, registration.metric)
     timings["icp"] = _ms(start)
-    return Frame(points, features, icp_points, timings, icp)
+    return Frame(points, descriptors, icp_points, timings, icp)
 
 
-def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.ndarray | None = None):
+def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None):
     """Register ``moving`` onto ``fixed``; ``guess`` (4 x 4) is the fallback
     initial transform (identity if None) when the robust fit fails or ICP
     ends far off. Never raises on a hard pair: the reason is in ``fallback``."""
     guess = np.eye(4) if guess is None else guess
+    features, fit = config.features, config.registration
     timings, fallback = {}, None
 
     # 1. Match descriptors (current scan = moving, previous scan = fixed).
     start = time.perf_counter()
-    matches = match_features(moving.features, fixed.features, config.match_threshold, config.match_ratio)
+    matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio)
     timings["match"] = _ms(start)
 
     # 2. Robust rigid fit on the matched points.
@@ -117,10 +119,10 @@ def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.n
         T_coarse, inliers = estimate_rigid_msac(
             moving.points[matches[:, 0]],
             fixed.points[matches[:, 1]],
-            config.max_distance,
-            config.max_num_trials,
-            config.seed,
-            config.confidence,
+            fit.max_distance,
+            fit.max_num_trials,
+            fit.seed,
+            fit.confidence,
         )
     except SlamError as exc:
         T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
@@ -128,10 +130,10 @@ def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.n
 
     # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
     start = time.perf_counter()
-    T_fine, rmse = _icp(moving, fixed, T_coarse, config)
-    if rmse > config.icp_fallback_rmse and fallback is None:
-        T_retry, rmse_retry = _icp(moving, fixed, guess, config)
-        fallback = f"ICP RMSE {rmse:.2f} m > {config.icp_fallback_rmse} m from the robust fit; "
+    T_fine, rmse = _icp(moving, fixed, T_coarse, fit)
+    if rmse > fit.icp_fallback_rmse and fallback is None:
+        T_retry, rmse_retry = _icp(moving, fixed, guess, fit)
+        fallback = f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m from the robust fit; "
         if rmse_retry < rmse:
             T_fine, rmse, T_coarse = T_retry, rmse_retry, guess
             fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
@@ -141,10 +143,10 @@ def register_frames(moving: Frame, fixed: Frame, config: SlamConfig, guess: np.n
     return PairRegistration(moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback)
 
 
-def register_pair(moving_scan, fixed_scan, config: SlamConfig | None = None, guess=None) -> PairRegistration:
+def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=None) -> PairRegistration:
     """Downsample, describe, match, fit and refine one pair of scans
     (moving -> fixed), returning everything a figure needs."""
-    config = config or SlamConfig()
+    config = config or Config()
     moving = prepare(check_points(moving_scan, "the moving scan"), config)
     fixed = prepare(check_points(fixed_scan, "the fixed scan"), config)
     result = register_frames(moving, fixed, config, guess)
@@ -152,13 +154,13 @@ def register_pair(moving_scan, fixed_scan, config: SlamConfig | None = None, gue
     return result
 
 
-def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = None, progress=False) -> OdometryResult:
+def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None, progress=False) -> OdometryResult:
     """Odometry over the accepted scans of a Dataset (or a list of (N, 3) scans).
 
     ``first_pose`` (4 x 4) anchors the first accepted scan; by default the
     dataset's first ground-truth pose (identity for a bare list of scans).
     """
-    config = config or SlamConfig()
+    config = config or Config()
     scans = getattr(dataset_or_scans, "scans", dataset_or_scans)
     if first_pose is None:
         poses_gt = getattr(dataset_or_scans, "poses", None)
@@ -166,7 +168,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = 
     first_pose = np.asarray(first_pose, dtype=np.float64)
     if first_pose.shape != (4, 4):
         raise SlamError(f"the first pose must be a 4 x 4 matrix, got shape {first_pose.shape}")
-    indices = np.arange(0, len(scans), config.skip_frames)
+    indices = np.arange(0, len(scans), config.registration.skip_frames)
     if len(indices) < 2:
         raise SlamError(f"odometry needs at least 2 accepted scans, got {len(indices)} from {len(scans)} scans")
 
@@ -210,11 +212,11 @@ def run_odometry(dataset_or_scans, first_pose=None, config: SlamConfig | None = 
     )
 
 
-def _icp(moving: Frame, fixed: Frame, init: np.ndarray, config: SlamConfig) -> tuple[np.ndarray, float]:
+def _icp(moving: Frame, fixed: Frame, init: np.ndarray, fit: RegistrationConfig) -> tuple[np.ndarray, float]:
     """ICP between the frames' prepared clouds (bare points for a Frame built by hand)."""
-    source = moving.icp if moving.icp is not None and moving.icp.metric == config.metric else moving.icp_points
-    target = fixed.icp if fixed.icp is not None and fixed.icp.metric == config.metric else fixed.icp_points
-    return refine_icp(source, target, init, config.metric, config.inlier_distance, tolerance=ICP_TOLERANCE)
+    source = moving.icp if moving.icp is not None and moving.icp.metric == fit.metric else moving.icp_points
+    target = fixed.icp if fixed.icp is not None and fixed.icp.metric == fit.metric else fixed.icp_points
+    return refine_icp(source, target, init, fit.metric, fit.inlier_distance, fit.icp_max_iterations, fit.icp_tolerance)
 
 
 def _add(*timings: dict) -> dict:

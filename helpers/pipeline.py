@@ -9,7 +9,6 @@ Accepted scans are the pose-graph nodes, numbered 0, 1, 2, ...;
 from __future__ import annotations
 
 import hashlib
-import json
 import logging
 import pickle
 import time
@@ -19,16 +18,15 @@ from pathlib import Path
 import numpy as np
 
 from . import paths
-from .config import Config, SlamConfig, config_to_dict, config_to_toml
+from .config import Config
+from .configfile import config_to_toml
 from .dataset import Dataset, create_dataset
 from .features import grid_average
 from .loopclosure import best_scan_registration, find_loop_candidates, icp_with
 from .odometry import OdometryResult, run_odometry
-from .plyio import write_ply
-from .posegraph import ICP_EDGE_SIGMAS, OptimizationResult, PoseGraph, information_from_sigmas
+from .posegraph import OptimizationResult, PoseGraph, information_from_sigmas
 from .progress import progress_bar
 from .submaps import SubmapIndex, build_submap
-from .trajectory import write_tum
 
 log = logging.getLogger(__name__)
 
@@ -66,14 +64,14 @@ class LoopQuery:
 class SlamResult:
     """What a run estimated; :mod:`helpers.evaluation` grades it against the ground truth."""
 
-    config: SlamConfig
+    config: Config
     indices: np.ndarray  # (K,) dataset index of each node
     odometry: OdometryResult
     clouds: list[np.ndarray]  # (N_k, 3) downsampled scans, sensor frame
     submaps: SubmapIndex
     queries: list[LoopQuery]
     graph: OptimizationResult
-    extra_edges: list[Edge]  # odometry edges that skip nodes (see SlamConfig.edges_back)
+    extra_edges: list[Edge]  # odometry edges that skip nodes (see ``[pose_graph] edges_back``)
     map_points: np.ndarray  # (M, 3) global map at the optimised poses
     n_scans: int  # scans in the dataset, accepted or not
     runtime_s: dict = field(default_factory=dict)
@@ -92,11 +90,11 @@ class SlamResult:
         return self.graph.poses
 
 
-def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool = False) -> SlamResult:
+def run_slam(dataset: Dataset, config: Config | None = None, progress: bool = False) -> SlamResult:
     """Estimate the trajectory and the map from ``dataset.scans`` alone (the
     first ground-truth pose anchors the first node, as in the reference; no
     other true pose is read: :mod:`helpers.evaluation` grades the result)."""
-    config = config or SlamConfig()
+    config = config or Config()
     runtime = {}
     anchor = dataset.poses[0]
 
@@ -108,7 +106,7 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     # 2.-3. Submaps and loop-closure queries, scan after scan, on the odometry
     #       poses. ICP works on the same finer clouds as in the odometry.
     start = time.perf_counter()
-    step = config.icp_grid_step or config.grid_step
+    step = config.registration.icp_grid_step or config.features.grid_step
     clouds = [grid_average(dataset.scans[i], step) for i in odometry.indices]
     submaps, queries = submaps_and_loops(clouds, odometry.poses, config, progress)
     runtime["submaps_and_loop_closure"] = time.perf_counter() - start
@@ -120,12 +118,12 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     runtime["edges_back"] = time.perf_counter() - start
     start = time.perf_counter()
     graph = build_pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
-    optimized = graph.optimize(anchor_pose=anchor, loop_kernel=config.loop_kernel)
+    optimized = graph.optimize(anchor_pose=anchor, loop_kernel=config.pose_graph.loop_kernel)
     runtime["pose_graph"] = time.perf_counter() - start
 
     # 5. The map: every accepted scan at its optimised pose, merged on a grid.
     start = time.perf_counter()
-    map_points = build_submap(clouds, optimized.poses, config.align_grid_step)
+    map_points = build_submap(clouds, optimized.poses, config.map.align_grid_step)
     runtime["map"] = time.perf_counter() - start
 
     return SlamResult(
@@ -143,19 +141,19 @@ def run_slam(dataset: Dataset, config: SlamConfig | None = None, progress: bool 
     )
 
 
-def submaps_and_loops(clouds, poses, config: SlamConfig, progress: bool = False):
+def submaps_and_loops(clouds, poses, config: Config, progress: bool = False):
     """The reference's main loop over the accepted scans (own frames, at their
     odometry ``poses``): add the scan to the current submap (a new one every
     ``n_scans_per_submap`` scans) and, once there are more than
     ``sub_map_thresh`` submaps, query the old ones for a loop.
     Returns the submaps and the queries that registered something."""
-    icp = icp_with(config.metric, config.inlier_distance)
-    submaps = SubmapIndex(config.n_scans_per_submap, config.align_grid_step)
+    icp = _loop_icp(config)
+    submaps = SubmapIndex(config.map.n_scans_per_submap, config.map.align_grid_step)
     queries: list[LoopQuery] = []
     bar = progress_bar(len(clouds), "submaps and loops", enabled=progress)
     for node, (cloud, pose) in enumerate(zip(clouds, poses, strict=True)):
         submaps.add_scan(cloud, pose)
-        if len(submaps) > config.sub_map_thresh:
+        if len(submaps) > config.loop_closure.sub_map_thresh:
             query = loop_query(node, cloud, pose, submaps, clouds, poses, icp, config)
             if query is not None:
                 queries.append(query)
@@ -165,10 +163,11 @@ def submaps_and_loops(clouds, poses, config: SlamConfig, progress: bool = False)
     return submaps, queries
 
 
-def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp, config: SlamConfig):
+def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp, config: Config):
     """One loop query of node ``node``: (1) the old submaps near its pose,
     verified by ICP; (2) the best scan of the matching submaps, kept as a loop
     edge if its RMSE is below ``rmse_threshold``. None if no submap was registered."""
+    loops = config.loop_closure
     # 1. Old submaps within the (growing) search radius, verified by ICP.
     candidates = find_loop_candidates(
         submaps.points,
@@ -176,11 +175,8 @@ def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp,
         cloud,
         pose,
         current_submap_id=len(submaps) - 1,
-        sub_map_thresh=config.sub_map_thresh,
-        search_radius=config.loop_closure_search_radius,
-        loop_closure_threshold=config.loop_closure_threshold,
         icp_fn=icp,
-        radius_growth=config.loop_search_growth,
+        settings=loops,
     )
     if not len(candidates.tried_ids):
         return None
@@ -188,9 +184,9 @@ def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp,
     # 2. The best scan-to-scan match of the matching submaps becomes the loop edge.
     closure, best = None, float("inf")
     if len(candidates.ids):
-        match = best_scan_registration(cloud, node, candidates, clouds, poses, config.n_scans_per_submap, icp)
+        match = best_scan_registration(cloud, node, candidates, clouds, poses, config.map.n_scans_per_submap, icp)
         best = match.rmse
-        if match.rmse < config.rmse_threshold:
+        if match.rmse < loops.rmse_threshold:
             log.info("loop edge %d -> %d, ICP RMSE %.3f m", match.i, match.j, match.rmse)
             closure = Edge(match.i, match.j, match.relative_pose, match.rmse)
     return LoopQuery(
@@ -207,38 +203,44 @@ def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp,
     )
 
 
-def _edges_back(clouds, relative: np.ndarray, config: SlamConfig) -> list[Edge]:
+def _loop_icp(config: Config):
+    """The ICP of loop checks and edges back: the odometry's metric and
+    inlier distance, the loop closure's iteration cap, scored by surface RMSE."""
+    fit = config.registration
+    return icp_with(fit.metric, fit.inlier_distance, config.loop_closure.icp_max_iterations, fit.icp_tolerance)
+
+
+def _edges_back(clouds, relative: np.ndarray, config: Config) -> list[Edge]:
     """Register every node to the nodes 2 .. ``edges_back`` before it, from
     the chained odometry as the initial guess. Each extra edge measures the
     motion again with other points, so the pose graph can average the
     odometry's random errors instead of summing them. Registrations scored
     above ``rmse_threshold`` are left out."""
-    icp = icp_with(config.metric, config.inlier_distance)
+    icp = _loop_icp(config)
     edges = []
-    for back in range(2, config.edges_back + 1):
+    for back in range(2, config.pose_graph.edges_back + 1):
         for j in range(back, len(clouds)):
             guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
             transform, rmse = icp(clouds[j], clouds[j - back], guess)
-            if rmse < config.rmse_threshold:
+            if rmse < config.loop_closure.rmse_threshold:
                 edges.append(Edge(j - back, j, transform, rmse))
             else:
                 log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
     return edges
 
 
-def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: SlamConfig) -> PoseGraph:
+def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: Config) -> PoseGraph:
     """The pose graph of a run: the first node at the first odometry pose, an
     edge per odometry step, the ``extra`` edges that skip nodes and the
     ``loops`` (anything with ``i``, ``j`` and ``relative``) as loop edges.
 
     With ``graph_weights = "icp"`` every registration gets the sigmas of
-    :data:`ICP_EDGE_SIGMAS`, times the number of steps an edge spans: an edge
-    to the scan ``k`` nodes back is measured on a smaller overlap and is less
-    sure (on the default the along-track error of a ``k``-step edge grows
-    from 7.5 cm at ``k = 1`` to 12, 17 and 21 cm at 2, 3 and 4).
+    ``[pose_graph] edge_sigma_m`` and ``edge_sigma_deg``, times the number of
+    steps an edge spans: an edge to the scan ``k`` nodes back is measured on a
+    smaller overlap and is less sure (notebook 6 measures how much).
     """
-    icp_weights = config.graph_weights == "icp"
-    sigmas = ICP_EDGE_SIGMAS if icp_weights else np.ones(6)
+    icp_weights = config.pose_graph.graph_weights == "icp"
+    sigmas = config.pose_graph.edge_sigmas if icp_weights else np.ones(6)
     graph = PoseGraph()
     graph.add_node(odometry.poses[0])
     for step in odometry.relative:
@@ -249,26 +251,6 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     for loop in loops:
         graph.add_loop(loop.i, loop.j, loop.relative, information)
     return graph
-
-
-def write_run(result: SlamResult, config: Config, out_dir, metrics: dict, poses_gt: np.ndarray) -> Path:
-    """Write ``metrics.json`` (``metrics``, from :func:`helpers.evaluation.run_metrics`,
-    and the config), the TUM trajectories of the ground truth (``poses_gt``,
-    (K, 4, 4), one per node), the odometry and the optimised poses (one line
-    per accepted scan, its dataset index as the stamp), ``map.ply`` and the
-    ``config.toml`` used, all or nothing."""
-    metrics = {**metrics, "config": config_to_dict(config)}
-    with paths.atomic_dir(out_dir, "metrics.json") as work:
-        (work / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
-        for name, poses in (
-            ("gt", poses_gt),
-            ("odometry", result.poses_odometry),
-            ("optimized", result.poses_optimized),
-        ):
-            write_tum(work / f"trajectory_{name}.txt", poses, result.indices)
-        write_ply(work / "map.ply", result.map_points)
-        (work / "config.toml").write_text(config_to_toml(config))
-    return Path(out_dir)
 
 
 def core_fingerprint() -> bytes:
@@ -301,7 +283,7 @@ def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
         pass
     except Exception as exc:  # a damaged pickle raises many types: it is a miss
         log.warning("cache %s is unreadable (%s): computing the run again", cache, exc)
-    result = run_slam(dataset, config.slam)
+    result = run_slam(dataset, config)
     cache.parent.mkdir(parents=True, exist_ok=True)
     paths.write_atomically(cache, lambda f: pickle.dump(result, f))
     return dataset, result

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from .config import LOOP_KERNELS
 from .errors import SlamError
 from .geometry import check_pose
 
@@ -37,18 +38,11 @@ log = logging.getLogger(__name__)
 # rotation component. Order: x y z rx ry rz.
 ODOMETRY_SIGMAS = np.ones(6)
 LOOP_INFORMATION = np.eye(6)
-# With identity weights a rotation of 0.1 rad costs as little as 0.1 m, so a
-# wrong loop can fold the whole trajectory cheaply and no robust kernel can
-# tell it from a right one. For robust kernels give every edge sigmas close to
-# the real error of ICP between overlapping scans, such as these (0.1 m, 0.3 deg),
-# for odometry and loops alike: then a residual "in sigmas" means something.
-ICP_EDGE_SIGMAS = np.array([0.1, 0.1, 0.1, *np.radians([0.3, 0.3, 0.3])])
 # The anchor (the reference's FirstNodePose) is held by a very stiff prior.
 PRIOR_SIGMAS = np.full(6, 1e-4)
 # Robust kernels act on the whitened residual norm (in sigmas). These are the
 # textbook tunings that keep 95 % efficiency on Gaussian noise.
 KERNEL_SCALES = {"huber": 1.345, "cauchy": 2.3849}
-KERNELS = ("none", "huber", "cauchy")
 _ESTIMATORS = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
 MAX_ITERATIONS = 100
 
@@ -259,8 +253,8 @@ def _gaussian(information: np.ndarray):
 
 
 def _loop_noise_factory(kernel: str, scale: float | None):
-    if kernel not in KERNELS:
-        raise SlamError(f"loop_kernel must be one of {', '.join(KERNELS)}, got {kernel!r}")
+    if kernel not in LOOP_KERNELS:
+        raise SlamError(f"loop_kernel must be one of {', '.join(LOOP_KERNELS)}, got {kernel!r}")
     if kernel == "none":
         return _gaussian
     scale = KERNEL_SCALES[kernel] if scale is None else float(scale)

@@ -77,7 +77,7 @@ class SubmapIndex:
         index.points, index.centres  # the clouds, and (K, 3) centres
     """
 
-    def __init__(self, n_scans_per_submap: int = 3, align_grid_step: float = 1.2) -> None:
+    def __init__(self, n_scans_per_submap: int, align_grid_step: float) -> None:
         if int(n_scans_per_submap) != n_scans_per_submap or n_scans_per_submap < 1:
             raise SlamError(f"n_scans_per_submap must be an integer of at least 1, got {n_scans_per_submap!r}")
         if not (np.isfinite(align_grid_step) and align_grid_step > 0):

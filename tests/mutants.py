@@ -35,7 +35,7 @@ MUTANTS = {
     "loop closure disabled": (
         "tests/test_pipeline.py",
         "helpers/pipeline.py",
-        "        if len(submaps) > config.sub_map_thresh:\n",
+        "        if len(submaps) > config.loop_closure.sub_map_thresh:\n",
         "        if False:\n",
     ),
     "ICP returns its initial guess": (

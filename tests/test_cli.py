@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from helpers.__main__ import main
-from helpers.config import SensorConfig, SlamConfig, load_config
+from helpers.config import Config, FeaturesConfig, SensorConfig
+from helpers.configfile import config_to_toml, load_config
 
 
 def run(*args):
@@ -42,8 +43,13 @@ def test_bad_input_is_one_line_exit_2_and_no_output(tmp_path):
         ("[sensor]\ndropout = 1.5\n", "dropout must be a probability in [0, 1)"),
         ("[sensor]\nazimuth = [13, -13, 0.08]\n", "azimuth must be [start, stop, step]"),
         ("[sensor]\nmax_range = 'far'\n", "max_range must be a number"),
-        ("[slam]\nmetric = 'planeToPlane'\n", "metric must be one of point-to-point"),
-        ("[slam]\nneighbors = 2\n", "neighbors must be an integer from 3 to 1,000"),
+        ("[registration]\nmetric = 'planeToPlane'\n", "metric must be one of point-to-point"),
+        ("[features]\nneighbors = 2\n", "neighbors must be an integer from 3 to 1,000"),
+        (
+            "[slam]\ngrid_step = 1.0\nsub_map_thresh = 4\n",
+            "grid_step -> [features] grid_step; sub_map_thresh -> [loop_closure]",
+        ),
+        ("[registration]\ngrid_step = 1.0\n", "unknown key(s) ['grid_step']"),
         ("[sensor\n", "not valid TOML"),
     ],
 )
@@ -65,20 +71,39 @@ def test_empty_scans_are_reported_as_an_error(tmp_path, capsys, short_flight):
 
 def test_config_file_overrides_defaults(tmp_path):
     path = tmp_path / "c.toml"
-    path.write_text("[sensor]\naltitude = 400\nazimuth = [-6, 6, 0.1]\nseed = 9\n[slam]\ngrid_step = 1.0\n")
+    path.write_text("[sensor]\naltitude = 400\nazimuth = [-6, 6, 0.1]\nseed = 9\n[features]\ngrid_step = 1.0\n")
     config = load_config(path)
     assert config.sensor == SensorConfig(altitude=400.0, azimuth=(-6.0, 6.0, 0.1), seed=9)
-    assert config.slam == SlamConfig(grid_step=1.0)
+    assert config.features == FeaturesConfig(grid_step=1.0)
+    assert config == Config().with_values(
+        sensor=dict(altitude=400.0, azimuth=(-6.0, 6.0, 0.1), seed=9), features=dict(grid_step=1.0)
+    )
     assert load_config(None).sensor.altitude == 700.0
 
 
+def test_written_config_reads_back_the_same(tmp_path):
+    config = Config().with_values(
+        registration=dict(metric="point-to-plane", icp_tolerance=1e-6),
+        loop_closure=dict(sub_map_thresh=4),
+        pose_graph=dict(loop_kernel="huber"),
+    )
+    path = tmp_path / "c.toml"
+    path.write_text(config_to_toml(config))
+    assert load_config(path) == config
+
+
 def test_reference_values_are_the_defaults():
-    slam = SlamConfig()
-    reference = dict(skip_frames=3, grid_step=1.5, neighbors=60, match_threshold=0.1, match_ratio=0.97)
-    reference |= dict(max_distance=1.0, max_num_trials=3000, metric="plane-to-plane", inlier_distance=3.0)
-    reference |= dict(align_grid_step=1.2, loop_closure_search_radius=7.9, n_scans_per_submap=3)
-    reference |= dict(sub_map_thresh=15, loop_closure_threshold=0.6, rmse_threshold=0.6)
-    assert {k: getattr(slam, k) for k in reference} == reference
+    config = Config()
+    reference = {
+        "features": dict(grid_step=1.5, neighbors=60, match_threshold=0.1, match_ratio=0.97),
+        "registration": dict(skip_frames=3, max_distance=1.0, max_num_trials=3000, confidence=0.99),
+        "map": dict(align_grid_step=1.2, n_scans_per_submap=3),
+        "loop_closure": dict(loop_closure_search_radius=7.9, sub_map_thresh=15, loop_closure_threshold=0.6),
+    }
+    reference["registration"] |= dict(metric="plane-to-plane", inlier_distance=3.0)
+    reference["loop_closure"] |= dict(rmse_threshold=0.6)
+    for table, values in reference.items():
+        assert {k: getattr(getattr(config, table), k) for k in values} == values
     sensor = SensorConfig()
     assert (sensor.altitude, sensor.max_range, sensor.azimuth, sensor.elevation) == (
         700.0,

@@ -11,7 +11,8 @@ import scipy.sparse
 from scipy.io import savemat
 
 from helpers.__main__ import main
-from helpers.config import MAX_RAYS_PER_FLIGHT, MAX_RAYS_PER_SCAN, Config, SensorConfig, SlamConfig, load_config
+from helpers.config import MAX_RAYS_PER_FLIGHT, MAX_RAYS_PER_SCAN, STAGE_TABLES, Config, SensorConfig
+from helpers.configfile import load_config
 from helpers.dataset import create_dataset
 from helpers.errors import SlamError
 from helpers.sensor import poses_from_waypoints, ray_pattern
@@ -92,8 +93,8 @@ CONFIG_ERRORS = [
     ("[sensor]\nazimuth = [-13, 13]\n", "azimuth must be a list of 3 numbers"),
     ("[sensor]\nazimuth = ['a', 13, 0.1]\n", "azimuth must be a number"),
     ("[sensor]\nazimuth = [[-13], 13, 0.1]\n", "azimuth must be a number"),
-    ("[slam]\nmetric = 3\n", "metric must be a string"),
-    ("[slam]\nneighbors = 60.0\n", "neighbors must be a 64-bit integer"),
+    ("[registration]\nmetric = 3\n", "metric must be a string"),
+    ("[features]\nneighbors = 60.0\n", "neighbors must be a 64-bit integer"),
     ("sensor = 5\n", r"\[sensor\] must be a table"),
     ("[[sensor]]\naltitude = 5\n", r"\[sensor\] must be a table"),
     ("[sensor.lidar]\naltitude = 5\n", r"unknown key\(s\) \['lidar'\]"),
@@ -114,9 +115,9 @@ CONFIG_ERRORS = [
     ("[sensor]\nazimuth = [-13, 13, nan]\n", "a finite step > 0"),
     ("[sensor]\nazimuth = [-13, 13, inf]\n", "a finite step > 0"),
     ("[sensor]\nelevation = [2.5, -2.5, 0.2]\n", "-89 < start <= stop < 89"),
-    ("[slam]\nskip_frames = 0\n", "skip_frames must be an integer of at least 1"),
-    ("[slam]\ngrid_step = 0\n", "grid_step must be a positive number"),
-    ("[slam]\nmatch_ratio = nan\n", r"match_ratio must be in \(0, 1\]"),
+    ("[registration]\nskip_frames = 0\n", "skip_frames must be an integer of at least 1"),
+    ("[features]\ngrid_step = 0\n", "grid_step must be a positive number"),
+    ("[features]\nmatch_ratio = nan\n", r"match_ratio must be in \(0, 1\]"),
     # huge
     (TINY_STEPS, "rays per scan"),
     ("[sensor]\nazimuth = [-13, 13, 1e-320]\n", "rays per scan"),
@@ -124,11 +125,17 @@ CONFIG_ERRORS = [
     ("[sensor]\naltitude = 1e400\n", "altitude must be a finite number"),
     ("[sensor]\naltitude = " + "9" * 400 + "\n", "altitude is too large a number"),
     ("[sensor]\nseed = 18446744073709551616\n", "seed must be a 64-bit integer"),
-    ("[slam]\nmax_num_trials = 1_000_000_000_000\n", "max_num_trials must be an integer from 1 to 1,000,000"),
-    ("[slam]\nneighbors = 1000000\n", "neighbors must be an integer from 3 to 1,000"),
-    ("[slam]\nedges_back = 1000000000000000000\n", "edges_back must be an integer from 1 to 100"),
+    ("[registration]\nmax_num_trials = 1_000_000_000_000\n", "max_num_trials must be an integer from 1 to 1,000,000"),
+    ("[features]\nneighbors = 1000000\n", "neighbors must be an integer from 3 to 1,000"),
+    ("[pose_graph]\nedges_back = 1000000000000000000\n", "edges_back must be an integer from 1 to 100"),
     ("a = " + "[" * 5000 + "]" * 5000 + "\n", "nests its values too deeply"),
     # not TOML
+    ("[loop_closure]\nmax_attempts = 0\n", "max_attempts must be an integer from 1 to 100"),
+    ("[registration]\nicp_max_iterations = 0\n", "icp_max_iterations must be an integer from 1 to 10,000"),
+    ("[pose_graph]\nedge_sigma_deg = 0\n", "edge_sigma_deg must be a positive number"),
+    # an earlier version's flat table
+    ("[slam]\nedges_back = 2\n", r"\[slam\] table is now split by stage: edges_back -> \[pose_graph\] edges_back"),
+    ("[slam]\n", r"\[slam\] table is now split by stage: use the tables"),
     ("[sensor\n", "not valid TOML"),
     ("[sensor]\naltitude = \n", "not valid TOML"),
     ("[sensor]\naltitude = 5\naltitude = 6\n", "not valid TOML"),
@@ -152,13 +159,13 @@ def test_a_configuration_that_is_not_text_is_refused(tmp_path):
     ("text", "expected"),
     [
         ("", Config()),
-        ("[sensor]\n[slam]\n", Config()),
+        ("[sensor]\n[features]\n[pose_graph]\n", Config()),
         ("[sensor]\naltitude = 500\n", Config(sensor=SensorConfig(altitude=500.0))),
         ("[sensor]\nazimuth = [-10, 10, 1]\n", Config(sensor=SensorConfig(azimuth=(-10.0, 10.0, 1.0)))),
         ("[sensor]\nmax_range = 1e5\ndropout = 0\n", Config(sensor=SensorConfig(max_range=1e5, dropout=0.0))),
         (
-            "[slam]\nmax_num_trials = 1_000_000\nedges_back = 100\n",  # at the limits
-            Config(slam=SlamConfig(max_num_trials=1_000_000, edges_back=100)),
+            "[registration]\nmax_num_trials = 1_000_000\n[pose_graph]\nedges_back = 100\n",  # at the limits
+            Config().with_values(registration=dict(max_num_trials=1_000_000), pose_graph=dict(edges_back=100)),
         ),
     ],
 )
@@ -174,11 +181,8 @@ TOML_VALUES = [
 
 
 def test_random_configurations_load_or_raise_slam_error(tmp_path):
-    keys = {
-        "sensor": list(vars(SensorConfig())) + ["bogus"],
-        "slam": list(vars(SlamConfig())) + ["bogus"],
-        "other": ["x"],
-    }
+    keys = {table: list(vars(getattr(Config(), table))) + ["bogus"] for table in STAGE_TABLES}
+    keys["other"] = ["x"]
     rng = random.Random(20240601)
     outcomes = {"loaded": 0, "refused": 0}
     for _ in range(400):

@@ -6,6 +6,7 @@ import open3d as o3d
 import pytest
 from scipy.spatial.transform import Rotation
 
+from helpers.config import Config, LoopClosureConfig
 from helpers.errors import SlamError
 from helpers.loopclosure import (
     LoopCandidates,
@@ -53,9 +54,15 @@ def named_clouds(n):
 def search(centres, icp, here=(0, 0, 0), current=None, thresh=0, **kw):
     centres = np.asarray(centres, dtype=float)
     current = len(centres) - 1 if current is None else current
-    kw.setdefault("radius_growth", 0.0)
+    kw.setdefault("loop_search_growth", 0.0)
     return find_loop_candidates(
-        named_clouds(len(centres)), centres, SCAN, pose(t=here), current, thresh, RADIUS, THRESHOLD, icp, **kw
+        named_clouds(len(centres)), centres, SCAN, pose(t=here), current, icp, settings(thresh, **kw)
+    )
+
+
+def settings(thresh, **kw) -> LoopClosureConfig:
+    return LoopClosureConfig(
+        loop_closure_search_radius=RADIUS, sub_map_thresh=thresh, loop_closure_threshold=THRESHOLD, **kw
     )
 
 
@@ -104,7 +111,7 @@ def test_scan_registered_in_map_frame_from_the_current_pose():
     here = pose(0.7, (3, 1, 700))
     icp = ScriptedIcp({})
     clouds = named_clouds(2)
-    found = find_loop_candidates(clouds, [[3, 1, 700], [3, 2, 700]], SCAN, here, 1, 0, RADIUS, THRESHOLD, icp)
+    found = find_loop_candidates(clouds, [[3, 1, 700], [3, 2, 700]], SCAN, here, 1, icp, settings(0))
     for _, moving, init in icp.calls:
         assert moving is not None and np.array_equal(moving, SCAN)
         np.testing.assert_allclose(init, here)
@@ -121,10 +128,10 @@ def test_growing_radius_finds_what_the_fixed_radius_misses():
     centres = np.array([[0, 0, 0], [200, 0, 0], [200, 200, 0], [0, 200, 0], [0, 100, 0]], dtype=float)
     here = (10, 0, 0)
     fixed = ScriptedIcp({})
-    assert len(search(centres, fixed, here=here, radius_growth=0.0).ids) == 0
+    assert len(search(centres, fixed, here=here, loop_search_growth=0.0).ids) == 0
     assert fixed.ids == []
     growing = ScriptedIcp({})
-    found = search(centres, growing, here=here, radius_growth=0.02)  # 7.9 + 0.02 * 710 m = 22.1 m
+    found = search(centres, growing, here=here, loop_search_growth=0.02)  # 7.9 + 0.02 * 710 m = 22.1 m
     np.testing.assert_array_equal(found.ids, [0])
 
 
@@ -149,10 +156,10 @@ def test_bad_inputs_raise_slam_error():
         search([[0, 0, np.nan]], icp)
     with pytest.raises(SlamError, match="current_submap_id"):
         search(np.zeros((2, 3)), icp, current=2)
-    with pytest.raises(SlamError, match="radius_growth"):
-        search(np.zeros((2, 3)), icp, radius_growth=-0.1)
+    with pytest.raises(SlamError, match="loop_search_growth"):
+        search(np.zeros((2, 3)), icp, loop_search_growth=-0.1)
     with pytest.raises(SlamError, match="rigid"):
-        find_loop_candidates(named_clouds(1), np.zeros((1, 3)), SCAN, np.ones((4, 4)), 0, 0, RADIUS, THRESHOLD, icp)
+        find_loop_candidates(named_clouds(1), np.zeros((1, 3)), SCAN, np.ones((4, 4)), 0, icp, settings(0))
     with pytest.raises(SlamError, match="max_attempts"):
         search(np.zeros((2, 3)), icp, max_attempts=0)
 
@@ -180,7 +187,7 @@ def open3d_icp(moving, fixed, init):
 
 @pytest.mark.parametrize("icp", ["open3d", "package"])
 def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
-    icp_fn = open3d_icp if icp == "open3d" else icp_with("plane-to-plane", inlier_distance=3.0)
+    icp_fn = open3d_icp if icp == "open3d" else icp_with("plane-to-plane", 3.0, 50, Config().registration.icp_tolerance)
     rng = np.random.default_rng(3)
     truth = np.array([pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)])
     scans = [scan_at(p, rng) for p in truth]
@@ -190,7 +197,7 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     revisit = pose(2.0, (3.5, 1.5, 50))  # back over scans 1-2, heading turned
     drifted = pose(2.0 + np.radians(2), (5.0, 0.5, 50.5))  # the odometry's guess: 1.8 m and 2 deg off
     scan = scan_at(revisit, rng)
-    found = find_loop_candidates(index.points, index.centres, scan, drifted, 1, 1, RADIUS, THRESHOLD, icp_fn)
+    found = find_loop_candidates(index.points, index.centres, scan, drifted, 1, icp_fn, settings(1))
     np.testing.assert_array_equal(found.ids, [0])
     match = best_scan_match(scan, 6, found, scans, truth, 3, THRESHOLD, icp_fn)
     expected = np.linalg.inv(truth[match.i]) @ revisit  # pose_j = pose_i @ T_ij

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from helpers.config import SlamConfig
+from helpers.config import Config
 from helpers.errors import SlamError
 from helpers.metrics import ate, rpe
 from helpers.odometry import Frame, prepare, register_frames, run_odometry
@@ -18,7 +18,7 @@ def flight(flight_over):
 
 @pytest.fixture(scope="module")
 def odometry(flight):
-    return run_odometry(flight, flight.poses[0], SlamConfig())
+    return run_odometry(flight, flight.poses[0], Config())
 
 
 def test_odometry_meets_the_relative_error_bar(flight, odometry):
@@ -45,7 +45,7 @@ def test_every_step_stays_within_bounds_whatever_the_noise(flight_over, noise_se
     by up to a micrometre (far more than the last-bit differences between
     CPUs) moves no step by more than a few centimetres."""
     data = flight_over(WAYPOINT_ROWS, noise_seed=noise_seed)
-    config = SlamConfig()
+    config = Config()
     result = run_odometry(data, config=config)
     truth = np.linalg.inv(data.poses[result.indices[:-1]]) @ data.poses[result.indices[1:]]
     error = np.linalg.norm(result.relative[:, :3, 3] - truth[:, :3, 3], axis=1)
@@ -69,7 +69,7 @@ def test_odometry_falls_back_on_a_hard_scan_instead_of_crashing(flight):
     scans = list(flight.scans[:10])
     rng = np.random.default_rng(0)
     scans[6] = rng.uniform([-30, -140, -620], [30, 140, -570], (4000, 3))  # noise: nothing matches
-    result = run_odometry(scans, flight.poses[0], SlamConfig())
+    result = run_odometry(scans, flight.poses[0], Config())
     assert len(result.poses) == 4
     # Scan 6 cannot be registered to scan 3, nor scan 9 to scan 6.
     assert [index for index, _ in result.fallbacks] == [6, 9]
@@ -78,14 +78,14 @@ def test_odometry_falls_back_on_a_hard_scan_instead_of_crashing(flight):
 
 def test_odometry_refuses_too_few_scans(flight):
     with pytest.raises(SlamError, match="at least 2 accepted scans"):
-        run_odometry(flight.scans[:2], np.eye(4), SlamConfig())
+        run_odometry(flight.scans[:2], np.eye(4), Config())
 
 
 def test_prepared_frames_register_like_bare_ones(flight):
     # prepare() readies the ICP cloud once; a Frame built by hand, without it, must register the same.
-    config = SlamConfig()
+    config = Config()
     moving, fixed = prepare(flight.scans[9], config), prepare(flight.scans[6], config)
-    assert moving.icp is not None and moving.icp.metric == config.metric
+    assert moving.icp is not None and moving.icp.metric == config.registration.metric
     assert set(moving.timings) == {"downsample", "fpfh", "icp"}
     bare_moving, bare_fixed = (Frame(f.points, f.features, f.icp_points, {}) for f in (moving, fixed))
     ready = register_frames(moving, fixed, config)

@@ -11,13 +11,15 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import Config, SlamConfig, config_to_toml
+from helpers.config import Config
+from helpers.configfile import config_to_toml
 from helpers.evaluation import grade_loops, run_metrics
-from helpers.pipeline import Edge, build_pose_graph, run_slam, write_run
+from helpers.output import write_run
+from helpers.pipeline import Edge, build_pose_graph, run_slam
 from helpers.trajectory import read_tum
 from helpers.waypoints import loop_waypoints
 
-SHORT = SlamConfig(sub_map_thresh=3)  # a short loop has few submaps
+SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3))  # a short loop has few submaps
 
 
 @pytest.fixture(scope="module")
@@ -45,14 +47,14 @@ def test_short_loop_is_closed_without_false_loops(short_loop, short_run):
     assert m["ate_rmse_optimized_m"] < m["ate_rmse_odometry_m"]
     assert m["rpe_trans_1_m"] < 0.15 and m["rpe_rot_1_deg"] < 0.1
     for loop in grade_loops(short_loop, short_run):  # every loop edge agrees with the truth
-        assert loop.error_m < 1.0 and loop.error_deg < 2.0 and loop.rmse < SHORT.rmse_threshold
+        assert loop.error_m < 1.0 and loop.error_deg < 2.0 and loop.rmse < SHORT.loop_closure.rmse_threshold
 
 
 def test_nodes_are_the_accepted_scans_and_anchored(short_loop, short_run):
-    np.testing.assert_array_equal(short_run.indices, np.arange(0, len(short_loop), SHORT.skip_frames))
+    np.testing.assert_array_equal(short_run.indices, np.arange(0, len(short_loop), SHORT.registration.skip_frames))
     np.testing.assert_allclose(short_run.poses_optimized[0], short_loop.poses[0], atol=1e-6)
     np.testing.assert_allclose(short_run.poses_odometry[0], short_loop.poses[0], atol=1e-12)
-    assert len(short_run.submaps) == len(short_run.indices) // SHORT.n_scans_per_submap
+    assert len(short_run.submaps) == len(short_run.indices) // SHORT.map.n_scans_per_submap
 
 
 def test_same_inputs_same_numbers(short_loop, short_run):
@@ -75,7 +77,7 @@ REPEAT_REL, REPEAT_ABS = 1e-9, 1e-12
 def test_two_runs_write_the_same_metrics(short_loop_csv, tmp_path):
     """``python -m helpers run`` twice, in fresh processes: the same metrics.json, runtimes aside."""
     config = tmp_path / "config.toml"
-    config.write_text(config_to_toml(Config(slam=SHORT)))
+    config.write_text(config_to_toml(SHORT))
     runs = []
     for name in ("first", "second"):
         command = [sys.executable, "-m", "helpers", "run", "--waypoints", str(short_loop_csv)]
@@ -95,13 +97,13 @@ def test_two_runs_write_the_same_metrics(short_loop_csv, tmp_path):
 
 def test_written_outputs(short_loop, short_run, tmp_path):
     poses_gt = short_loop.poses[short_run.indices]
-    out = write_run(short_run, Config(slam=SHORT), tmp_path / "run", run_metrics(short_loop, short_run), poses_gt)
+    out = write_run(short_run, tmp_path / "run", run_metrics(short_loop, short_run), poses_gt)
     metrics = json.loads((out / "metrics.json").read_text())
     for key in ("n_scans", "n_accepted", "n_loop_closures", "n_false_loop_closures", "ate_rmse_odometry_m"):
         assert key in metrics
     for key in ("ate_rmse_optimized_m", "rpe_trans_1_m", "rpe_rot_1_deg", "runtime_s", "config"):
         assert key in metrics
-    assert metrics["config"]["slam"]["sub_map_thresh"] == 3
+    assert metrics["config"]["loop_closure"]["sub_map_thresh"] == 3
     for name, poses in (("gt", poses_gt), ("optimized", short_run.poses_optimized)):
         stamps, read = read_tum(out / f"trajectory_{name}.txt")
         np.testing.assert_array_equal(stamps, short_run.indices)
@@ -111,7 +113,9 @@ def test_written_outputs(short_loop, short_run, tmp_path):
 
 def test_no_loop_possible_ends_with_odometry_only(short_loop):
     """With no loop possible and no edges back, the graph is the odometry chain."""
-    result = run_slam(short_loop, SlamConfig(sub_map_thresh=1000, edges_back=1))
+    result = run_slam(
+        short_loop, Config().with_values(loop_closure=dict(sub_map_thresh=1000), pose_graph=dict(edges_back=1))
+    )
     m = run_metrics(short_loop, result)
     assert m["n_loop_closures"] == 0 and result.queries == [] and result.extra_edges == []
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
@@ -128,7 +132,7 @@ def test_flat_map_falls_back_instead_of_crashing(tmp_path):
     flight = tmp_path / "flight.csv"
     np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
     data = helpers.create_dataset(tmp_path / "flat.las", flight)
-    result = run_slam(data, SlamConfig())
+    result = run_slam(data, Config())
     assert len(result.odometry.fallbacks) == len(result.indices) - 1
     assert all("robust fit failed" in reason or "ICP" in reason for _, reason in result.odometry.fallbacks)
     assert np.isfinite(result.poses_optimized).all()
@@ -154,7 +158,9 @@ def test_an_edge_spanning_k_steps_has_k_times_the_sigmas(weights, expected_x):
     s and 2s (icp weights) least squares puts node 2 at 2.1 m; with equal
     weights (the reference's identity) at 2.2 m."""
     odometry = SimpleNamespace(poses=np.stack([_shift(0.0), _shift(1.0), _shift(2.0)]), relative=[_shift(1.0)] * 2)
-    graph = build_pose_graph(odometry, [Edge(0, 2, _shift(2.3), rmse=0.1)], [], SlamConfig(graph_weights=weights))
+    graph = build_pose_graph(
+        odometry, [Edge(0, 2, _shift(2.3), rmse=0.1)], [], Config().with_values(pose_graph=dict(graph_weights=weights))
+    )
     poses = graph.optimize().poses
     assert poses[2][0, 3] == pytest.approx(expected_x, abs=1e-6)
     assert poses[1][0, 3] == pytest.approx(expected_x / 2, abs=1e-6)

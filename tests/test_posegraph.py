@@ -4,11 +4,13 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from helpers.config import PoseGraphConfig
 from helpers.errors import SlamError
-from helpers.posegraph import ICP_EDGE_SIGMAS, PoseGraph, information_from_sigmas
+from helpers.posegraph import PoseGraph, information_from_sigmas
 
 RING_NODES = 24
 RING_RADIUS = 50.0  # m
+ICP_EDGE_SIGMAS = PoseGraphConfig().edge_sigmas  # the pipeline's edge sigmas with icp weights
 NOISE_T = 0.1  # m, odometry translation noise per step (= ICP_EDGE_SIGMAS)
 NOISE_R = np.radians(0.3)  # rad, odometry rotation noise per step (= ICP_EDGE_SIGMAS)
 

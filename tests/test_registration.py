@@ -8,6 +8,7 @@ from helpers.errors import SlamError
 from helpers.icp import icp_cloud, icp_rmse, refine_icp
 from helpers.registration import _trials_needed, estimate_rigid_msac, kabsch
 
+ICP = (30, 1e-6)  # iterations at most, and a tight tolerance: these tests want ICP converged
 WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
 
 
@@ -138,7 +139,7 @@ def test_msac_refuses_too_few_matches_and_pure_noise():
 def test_icp_metrics_agree_on_an_easy_case(flight, metric):
     scan = flight.scans[10]
     truth = _transform(1.0, [0.8, -0.5, 0.2])
-    T, rmse = refine_icp(scan, _apply(truth, scan), np.eye(4), metric, 3.0)
+    T, rmse = refine_icp(scan, _apply(truth, scan), np.eye(4), metric, 3.0, *ICP)
     dt, dr = _errors(T, truth)
     assert dt < 0.05 and dr < 0.02
     assert rmse < 0.05  # the same points: the residual vanishes whatever the metric
@@ -149,8 +150,8 @@ def test_icp_on_prepared_clouds_equals_icp_on_bare_points(flight, metric):
     # Normals and covariances made once (what the odometry reuses) give what ICP computes itself.
     moving, fixed = flight.scans[13], flight.scans[10]
     init = np.linalg.inv(flight.poses[10]) @ flight.poses[13] @ _transform(0.3, [0.5, -0.4, 0.1])
-    T_bare, rmse_bare = refine_icp(moving, fixed, init, metric, 3.0)
-    T_ready, rmse_ready = refine_icp(icp_cloud(moving, metric), icp_cloud(fixed, metric), init, metric, 3.0)
+    T_bare, rmse_bare = refine_icp(moving, fixed, init, metric, 3.0, *ICP)
+    T_ready, rmse_ready = refine_icp(icp_cloud(moving, metric), icp_cloud(fixed, metric), init, metric, 3.0, *ICP)
     np.testing.assert_allclose(T_ready, T_bare, atol=1e-9)
     assert rmse_ready == pytest.approx(rmse_bare, abs=1e-9)
     # The RMSE Open3D reports is the one of the returned transform.
@@ -161,27 +162,27 @@ def test_icp_tolerance_in_metres_stops_early_but_lands_nearby(flight):
     moving, fixed = icp_cloud(flight.scans[13]), icp_cloud(flight.scans[10])
     truth = np.linalg.inv(flight.poses[10]) @ flight.poses[13]
     init = truth @ _transform(0.5, [1.0, -0.8, 0.2])
-    T_tight, _ = refine_icp(moving, fixed, init, tolerance=1e-6)
-    T_loose, _ = refine_icp(moving, fixed, init, tolerance=1e-3)
+    T_tight, _ = refine_icp(moving, fixed, init, "plane-to-plane", 3.0, 30, 1e-6)
+    T_loose, _ = refine_icp(moving, fixed, init, "plane-to-plane", 3.0, 30, 1e-3)
     assert _displacement(T_loose, T_tight, flight.scans[13]) < 0.02
 
 
 def test_icp_refuses_a_cloud_prepared_for_another_metric(flight):
     scan = flight.scans[0]
     with pytest.raises(SlamError, match="prepared for point-to-point"):
-        refine_icp(icp_cloud(scan, "point-to-point"), scan, np.eye(4), "plane-to-plane", 3.0)
+        refine_icp(icp_cloud(scan, "point-to-point"), scan, np.eye(4), "plane-to-plane", 3.0, *ICP)
     with pytest.raises(SlamError, match="tolerance"):
-        refine_icp(scan, scan, np.eye(4), "point-to-point", 3.0, tolerance=-1.0)
+        refine_icp(scan, scan, np.eye(4), "point-to-point", 3.0, 30, -1.0)
 
 
 def test_icp_refuses_bad_input(flight):
     scan = flight.scans[0]
     with pytest.raises(SlamError, match="metric"):
-        refine_icp(scan, scan, np.eye(4), "plane-to-point", 3.0)
+        refine_icp(scan, scan, np.eye(4), "plane-to-point", 3.0, *ICP)
     with pytest.raises(SlamError, match="4 x 4"):
-        refine_icp(scan, scan, np.eye(3), "point-to-point", 3.0)
+        refine_icp(scan, scan, np.eye(3), "point-to-point", 3.0, *ICP)
     with pytest.raises(SlamError, match="points"):
-        refine_icp(np.zeros((0, 3)), scan, np.eye(4), "point-to-point", 3.0)
+        refine_icp(np.zeros((0, 3)), scan, np.eye(4), "point-to-point", 3.0, *ICP)
 
 
 @pytest.mark.parametrize(

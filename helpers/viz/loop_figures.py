@@ -128,15 +128,14 @@ def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
     within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
     the nodes): the distance flown since that submap, how far away it looks on
     the odometry, and whether the node closed a loop."""
-    config = result.config
-    n = config.n_scans_per_submap
+    n = result.config.map.n_scans_per_submap
     subs = result.submaps.submaps
     true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
     closed = {loop.j for loop in result.loops}
     rows = []
     for node in range(len(result.indices)):
         count = (node + 1) // n
-        n_eligible = count - config.sub_map_thresh
+        n_eligible = count - result.config.loop_closure.sub_map_thresh
         if n_eligible <= 0:
             continue
         true_distance = np.linalg.norm(true_centres[:n_eligible] - poses_gt[node][:3, 3], axis=1)

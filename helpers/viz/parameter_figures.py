@@ -6,57 +6,29 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-from ..config import SlamConfig, describe
+from ..config import STAGE_TABLES, Config, describe
 from .style import COLORS, grid
 
 MATCH_COLORS = {"inlier": "#6a3d9a", "outlier": "#b0b0b0"}  # purple: kept by the robust fit; grey: rejected
 CORRECT_COLORS = {"correct": "#6a3d9a", "wrong": "#d0d0d0"}  # the same idea, judged by the ground truth
 
-# The reference workflow's name for each of our parameters (ours have none).
-REFERENCE_NAMES = {
-    "skip_frames": "skipFrames",
-    "grid_step": "gridStep",
-    "neighbors": "neighbors",
-    "match_threshold": "matchThreshold",
-    "match_ratio": "matchRatio",
-    "max_distance": "maxDistance",
-    "max_num_trials": "maxNumTrails",
-    "confidence": "Confidence",
-    "metric": "metric",
-    "inlier_distance": "inlierDistance",
-    "align_grid_step": "alignGridStep",
-    "loop_closure_search_radius": "loopClosureSearchRadius",
-    "n_scans_per_submap": "nScansPerSubmap",
-    "sub_map_thresh": "subMapThresh",
-    "loop_closure_threshold": "loopClosureThreshold",
-    "rmse_threshold": "rmseThreshold",
-}
-# Which stage (and notebook) each parameter belongs to, in workflow order.
-STAGES = (
-    ("Registration, notebook 3", ("skip_frames", "grid_step", "neighbors", "match_threshold", "match_ratio")),
-    ("", ("max_distance", "max_num_trials", "confidence", "seed", "metric", "inlier_distance", "icp_grid_step")),
-    ("", ("icp_fallback_rmse",)),
-    ("Submaps, notebook 4", ("align_grid_step", "n_scans_per_submap")),
-    ("Loop closure, notebook 5", ("loop_closure_search_radius", "sub_map_thresh", "loop_closure_threshold")),
-    ("", ("rmse_threshold", "loop_search_growth")),
-    ("Pose graph, notebook 6", ("edges_back", "graph_weights", "loop_kernel")),
-)
+# The notebook that explains each stage's table.
+NOTEBOOKS = {"features": 2, "registration": 3, "map": 4, "loop_closure": 5, "pose_graph": 6}
 
 
-def parameter_table(config: SlamConfig | None = None) -> str:
-    """Every SLAM parameter as a Markdown table, grouped by stage: name,
-    value, the reference's name and meaning. Parameters no stage lists are
-    put at the end, so none is ever left out."""
-    rows = {name: (value, meaning) for name, value, meaning in describe(config or SlamConfig())}
-    listed = [name for _, names in STAGES for name in names]
-    stages = [*STAGES, ("Other", tuple(n for n in rows if n not in listed))]
+def parameter_table(config: Config | None = None) -> str:
+    """Every SLAM parameter as a Markdown table, stage by stage as the
+    configuration nests them: name, value, the reference's name and meaning,
+    all read from the configuration's own fields."""
+    config = config or Config()
     lines = ["| stage | parameter | value | reference | meaning |", "|---|---|---|---|---|"]
-    for stage, names in stages:
-        for i, name in enumerate(n for n in names if n in rows):
-            value, meaning = rows[name]
-            label = f"**{stage}**" if stage and i == 0 else ""
-            reference = f"`{REFERENCE_NAMES[name]}`" if name in REFERENCE_NAMES else "(ours)"
-            lines.append(f"| {label} | `{name}` | {_value(value)} | {reference} | {meaning} |")
+    for table in STAGE_TABLES:
+        if table not in NOTEBOOKS:
+            continue
+        for i, (name, value, meaning, reference) in enumerate(describe(getattr(config, table))):
+            label = f"**[{table}]**, notebook {NOTEBOOKS[table]}" if i == 0 else ""
+            ref = f"`{reference}`" if reference else "(ours)"
+            lines.append(f"| {label} | `{name}` | {_value(value)} | {ref} | {meaning} |")
     return "\n".join(lines)
 
 

@@ -1,0 +1,32 @@
+"""The README's configuration table says what the code says."""
+
+import re
+from pathlib import Path
+
+from helpers.config import NOISE_SEED_VARIABLE, STAGE_TABLES, Config, describe
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def readme_rows() -> dict[tuple[str, str], tuple[str, str]]:
+    """(table, key) -> (default, reference) as the README's configuration table lists them."""
+    rows, table = {}, None
+    for line in README.read_text().splitlines():
+        if heading := re.fullmatch(r"\| \*\*\[(\w+)\]\*\* \|.*", line):
+            table = heading.group(1)
+        elif table and (row := re.fullmatch(r"\| `(\w+)` \| (.*?) \| (.*?) \| .* \|", line)):
+            rows[table, row.group(1)] = (row.group(2), row.group(3).strip("`"))
+        elif table and not line.startswith("|"):
+            table = None
+    return rows
+
+
+def test_the_configuration_table_lists_every_parameter_with_its_default(monkeypatch):
+    monkeypatch.delenv(NOISE_SEED_VARIABLE, raising=False)  # the README shows the sensor seed's real default
+    expected = {}
+    for table in STAGE_TABLES:
+        for name, value, _, reference in describe(getattr(Config(), table)):
+            default = list(value) if isinstance(value, tuple) else value
+            shown = f'"{default}"' if isinstance(default, str) else str(default)
+            expected[table, name] = (shown, reference or "")
+    assert readme_rows() == expected
