@@ -41,6 +41,8 @@ MAX_EDGES_BACK = 100  # each is one more registration per scan (the default make
 MAX_ITERATIONS = 10_000  # ICP iterations
 
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
+ICP_BACKENDS = ("small_gicp", "open3d")
+MODES = ("global", "tracking")
 GRAPH_WEIGHTS = ("icp", "identity")
 LOOP_KERNELS = ("none", "huber", "cauchy")
 
@@ -181,11 +183,20 @@ class RegistrationConfig(_Table):
         3.0, "ICP ignores correspondences farther apart than this, metres", "inlierDistance"
     )
     icp_grid_step: float = _param(0.75, "grid of the clouds ICP refines on, metres (0: the feature clouds)")
+    icp_backend: str = _param("small_gicp", "ICP library: small_gicp (fast) or open3d (the tutorial's first)")
     icp_max_iterations: int = _param(30, "most ICP iterations")
     icp_tolerance: float = _param(
         1e-3, "ICP stops earlier once an iteration changes its RMSE (m) and inlier share by less"
     )
     icp_fallback_rmse: float = _param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
+    mode: str = _param(
+        "global", "global: features and a robust fit for every scan (the reference); tracking: ICP from the last motion"
+    )
+    tracking_max_jump_m: float = _param(
+        1.0, "tracking: a step that ends this far (m) from the last motion is registered globally"
+    )
+    tracking_max_jump_deg: float = _param(6.0, "tracking: ... or turns this much (deg) more or less than it")
+    tracking_min_overlap: float = _param(0.8, "tracking: ... or pairs a smaller share of its points than this")
 
     def __post_init__(self):
         self._check("skip_frames", lambda v: v >= 1, "an integer of at least 1")
@@ -194,11 +205,16 @@ class RegistrationConfig(_Table):
         self._check("confidence", lambda v: 0 < v < 1, "in (0, 1)")
         self._check("seed", lambda v: v >= 0, "zero or a positive integer")
         self._one_of("metric", METRICS)
+        self._one_of("icp_backend", ICP_BACKENDS)
         self._check("inlier_distance", _positive, "a positive number")
         self._check("icp_grid_step", lambda v: math.isfinite(v) and v >= 0, "zero or a positive number")
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
         self._check("icp_tolerance", lambda v: 0 <= v < math.inf, "zero or a positive number")
         self._check("icp_fallback_rmse", _positive, "a positive number")
+        self._one_of("mode", MODES)
+        self._check("tracking_max_jump_m", _positive, "a positive number")
+        self._check("tracking_max_jump_deg", _positive, "a positive number")
+        self._check("tracking_min_overlap", lambda v: 0 <= v <= 1, "a share in [0, 1]")
 
 
 @dataclass(frozen=True)

@@ -1,5 +1,9 @@
 """Stage 3c: ICP refinement of a coarse fit (the reference's ``pcregistericp``),
-with clouds made ready once (normals, generalized-ICP covariances).
+with clouds made ready once (normals, generalized-ICP covariances, a k-d tree).
+
+Two back ends run the same three metrics: small_gicp (the default; parallel
+GICP and k-d trees made for this job) and Open3D (the ICP the tutorial
+started with, kept reachable with ``[registration] icp_backend = "open3d"``).
 
 A transform ``T`` (4 x 4) maps *moving* (source) points onto *fixed* (target)
 points: ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``.
@@ -7,12 +11,15 @@ points: ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import open3d as o3d
+import small_gicp
 
-from .config import METRICS
+from .config import ICP_BACKENDS, METRICS
 from .errors import SlamError
 from .features import to_cloud
 from .geometry import check_points
@@ -20,43 +27,85 @@ from .registration import SAMPLE_SIZE
 
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
 GICP_EPSILON = 1e-3  # generalized ICP: a point's covariance is this thin across its plane (Open3D's default)
+SMALL_GICP_TYPES = {"point-to-point": "ICP", "point-to-plane": "PLANE_ICP", "plane-to-plane": "GICP"}
+
+
+def threads() -> int:
+    """Threads for small_gicp: ``$OMP_NUM_THREADS`` when set (as Open3D and numpy obey it), else every core."""
+    value = os.environ.get("OMP_NUM_THREADS", "")
+    return int(value) if value.isdigit() and int(value) > 0 else os.cpu_count() or 1
 
 
 @dataclass(frozen=True, eq=False)
 class IcpCloud:
     """A cloud made ready for ICP once, so that every pair it is part of reuses it.
 
-    ``cloud`` is the Open3D cloud of ``points`` with what ``metric`` needs:
-    normals from ``ICP_NORMAL_NEIGHBORS`` neighbours (point-to-plane,
-    plane-to-plane) and the generalized-ICP covariances (plane-to-plane).
-    Open3D's generalized ICP otherwise re-estimates normals and covariances of
-    both clouds at every call, and a scan is the moving cloud of one pair and
-    the fixed cloud of the next.
+    With the ``open3d`` back end, ``cloud`` is the Open3D cloud of ``points``
+    with what ``metric`` needs: normals from ``ICP_NORMAL_NEIGHBORS``
+    neighbours (point-to-plane, plane-to-plane) and the generalized-ICP
+    covariances (plane-to-plane). With ``small_gicp``, ``cloud`` is its
+    PointCloud with normals and covariances from as many neighbours, and
+    ``tree`` its k-d tree. A scan is the moving cloud of one pair and the
+    fixed cloud of the next, so neither is computed twice.
     """
 
     points: np.ndarray  # (N, 3)
-    cloud: o3d.geometry.PointCloud
+    cloud: o3d.geometry.PointCloud | small_gicp.PointCloud
     metric: str
+    backend: str = "open3d"
+    tree: small_gicp.KdTree | None = None
+    reach: float = 0.0  # m, the farthest point from the origin: how far a small rotation moves a point
+
+    def nearest(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For each of ``points`` (M, 3): squared distance (m²) to its nearest point here, and that point's index."""
+        if self.tree is not None:
+            index, squared = self.tree.batch_nearest_neighbor_search(points, num_threads=threads())
+            return np.asarray(squared), np.asarray(index)
+        distance, index = self._scipy_tree.query(points, workers=threads())
+        return distance**2, index
+
+    @cached_property
+    def _scipy_tree(self):
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.points)
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(N, 3) unit normals (metrics other than point-to-point)."""
+        if self.backend == "small_gicp":
+            return self.cloud.normals()[:, :3]
+        return np.asarray(self.cloud.normals)
 
 
-def icp_cloud(points, metric: str = "plane-to-plane") -> IcpCloud:
-    """``points`` (N, 3) made ready for :func:`refine_icp` with ``metric``.
+def icp_cloud(points, metric: str, backend: str) -> IcpCloud:
+    """``points`` (N, 3) made ready for :func:`refine_icp` with ``metric`` on ``backend``.
 
-    For plane-to-plane the covariances are those Open3D's generalized ICP
-    would compute itself (normals from ``ICP_NORMAL_NEIGHBORS`` neighbours,
-    then ``R diag(eps, 1, 1) R^T`` with ``R`` turning the x axis onto the
-    normal, ``eps = GICP_EPSILON``), so a prepared cloud registers exactly
-    like a bare one.
+    For Open3D's plane-to-plane the covariances are those its generalized
+    ICP would compute itself (normals from ``ICP_NORMAL_NEIGHBORS``
+    neighbours, then ``R diag(eps, 1, 1) R^T`` with ``R`` turning the x axis
+    onto the normal, ``eps = GICP_EPSILON``), so a prepared cloud registers
+    exactly like a bare one. small_gicp estimates normals and covariances
+    from the same number of neighbours in one pass.
     """
     if metric not in METRICS:
         raise SlamError(f"unknown ICP metric {metric!r}: use one of {', '.join(METRICS)}")
+    if backend not in ICP_BACKENDS:
+        raise SlamError(f"unknown ICP back end {backend!r}: use one of {', '.join(ICP_BACKENDS)}")
     points = check_points(points, "the ICP cloud", minimum=SAMPLE_SIZE)
+    reach = float(np.sqrt((points**2).sum(axis=1).max()))
+    if backend == "small_gicp":
+        cloud = small_gicp.PointCloud(points)
+        tree = small_gicp.KdTree(cloud, num_threads=threads())
+        if metric != "point-to-point":
+            small_gicp.estimate_normals_covariances(cloud, tree, ICP_NORMAL_NEIGHBORS, threads())
+        return IcpCloud(points, cloud, metric, backend, tree, reach)
     cloud = to_cloud(points)
     if metric != "point-to-point":
         cloud.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(ICP_NORMAL_NEIGHBORS))
     if metric == "plane-to-plane":
         cloud.covariances = o3d.utility.Matrix3dVector(gicp_covariances(np.asarray(cloud.normals)))
-    return IcpCloud(points, cloud, metric)
+    return IcpCloud(points, cloud, metric, backend, None, reach)
 
 
 def gicp_covariances(normals: np.ndarray, epsilon: float = GICP_EPSILON) -> np.ndarray:
@@ -87,38 +136,44 @@ def refine_icp(
     inlier_distance: float,
     max_iterations: int,
     tolerance: float,
+    backend: str,
 ) -> tuple[np.ndarray, float]:
     """Refine ``init`` (4 x 4, moving -> fixed) by ICP; returns ``(T, rmse)``.
 
     ``moving`` and ``fixed`` are (N, 3) arrays or :class:`IcpCloud` made by
-    :func:`icp_cloud` for the same metric (then nothing per cloud is
-    recomputed). ``metric``: ``point-to-point``, ``point-to-plane`` (fixed-cloud
-    normals from ``ICP_NORMAL_NEIGHBORS`` neighbours) or ``plane-to-plane``
-    (generalized ICP). Pairs farther apart than ``inlier_distance`` (m) are
-    ignored. ICP stops after ``max_iterations`` or when, from one iteration to
-    the next, the inlier fraction changes by less than ``tolerance`` and the
-    RMSE by less than ``tolerance`` metres (Open3D compares the plain
-    differences). The pipeline takes all four from ``[registration]``.
+    :func:`icp_cloud` for the same metric and back end (then nothing per
+    cloud is recomputed). ``metric``: ``point-to-point``, ``point-to-plane``
+    (fixed-cloud normals from ``ICP_NORMAL_NEIGHBORS`` neighbours) or
+    ``plane-to-plane`` (generalized ICP). Pairs farther apart than
+    ``inlier_distance`` (m) are ignored. ICP stops after ``max_iterations``
+    or once an iteration changes little: with Open3D, the inlier fraction by
+    less than ``tolerance`` and the RMSE by less than ``tolerance`` metres;
+    with small_gicp, the transform moves no point by more than about
+    ``tolerance`` metres (its translation by less than ``tolerance``, its
+    rotation by less than ``tolerance`` over the farthest point's range).
+    The pipeline takes all five from ``[registration]``.
 
-    ``rmse`` (m) is always the same measure, whatever the metric: the root
-    mean square distance from each moved moving point to its nearest fixed
-    point, over the pairs closer than ``inlier_distance``; ``inf`` if none is.
-    Open3D computes it after its last update, at the transform it returns, so
-    no second nearest-neighbour pass is needed.
+    ``rmse`` (m) is always the same measure, whatever the metric and back
+    end: the root mean square distance from each moved moving point to its
+    nearest fixed point, over the pairs closer than ``inlier_distance``;
+    ``inf`` if none is.
     """
     init = np.asarray(init, dtype=np.float64)
     if metric not in METRICS:
         raise SlamError(f"unknown ICP metric {metric!r}: use one of {', '.join(METRICS)}")
     if init.shape != (4, 4) or not np.isfinite(init).all():
         raise SlamError(f"the initial transform must be a finite 4 x 4 matrix, got shape {init.shape}")
-    source = _ready(moving, "the moving cloud", metric)
-    target = _ready(fixed, "the fixed cloud", metric)
+    source = _ready(moving, "the moving cloud", metric, backend)
+    target = _ready(fixed, "the fixed cloud", metric, backend)
     if not (np.isfinite(inlier_distance) and inlier_distance > 0):
         raise SlamError(f"the ICP inlier distance must be a positive number of metres, got {inlier_distance!r}")
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise SlamError(f"the ICP tolerance must be zero or a positive number, got {tolerance!r}")
+    if backend == "small_gicp":
+        return _small_gicp(source, target, init, metric, inlier_distance, max_iterations, tolerance)
 
     reg = o3d.pipelines.registration
+    source, target = source.cloud, target.cloud
     criteria = reg.ICPConvergenceCriteria(tolerance, tolerance, int(max_iterations))
     if metric == "plane-to-plane":
         estimation = reg.TransformationEstimationForGeneralizedICP(GICP_EPSILON)
@@ -135,13 +190,40 @@ def refine_icp(
     return transform, rmse
 
 
-def _ready(cloud, what: str, metric: str) -> o3d.geometry.PointCloud:
-    """The Open3D cloud ICP with ``metric`` needs, from an array or an :class:`IcpCloud`."""
+def _small_gicp(source: IcpCloud, target: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance):
+    """small_gicp's ICP, then the RMSE of :func:`refine_icp` from the target's k-d tree."""
+    result = small_gicp.align(
+        target.cloud,
+        source.cloud,
+        target.tree,
+        init_T_target_source=init,
+        registration_type=SMALL_GICP_TYPES[metric],
+        max_correspondence_distance=inlier_distance,
+        num_threads=threads(),
+        max_iterations=int(max_iterations),
+        rotation_epsilon=tolerance / max(source.reach, 1.0),
+        translation_epsilon=tolerance,
+    )
+    transform = np.array(result.T_target_source)
+    squared, _ = target.nearest(source.points @ transform[:3, :3].T + transform[:3, 3])
+    paired = squared < inlier_distance**2
+    rmse = float(np.sqrt(squared[paired].mean())) if paired.any() else float("inf")
+    return transform, rmse
+
+
+def _ready(cloud, what: str, metric: str, backend: str) -> IcpCloud:
+    """The cloud ICP with ``metric`` on ``backend`` needs, from an array or an :class:`IcpCloud`."""
     if isinstance(cloud, IcpCloud):
-        if cloud.metric != metric:
-            raise SlamError(f"{what} was prepared for {cloud.metric} ICP, not {metric}")
-        return cloud.cloud
-    return icp_cloud(check_points(cloud, what, minimum=SAMPLE_SIZE), metric).cloud
+        if (cloud.metric, cloud.backend) != (metric, backend):
+            raise SlamError(f"{what} was prepared for {cloud.metric} ICP on {cloud.backend}, not {metric} on {backend}")
+        return cloud
+    return icp_cloud(check_points(cloud, what, minimum=SAMPLE_SIZE), metric, backend)
+
+
+def overlap(source: IcpCloud, target: IcpCloud, transform: np.ndarray, inlier_distance: float) -> float:
+    """Share of ``source``'s points that ``transform`` brings within ``inlier_distance`` (m) of ``target``."""
+    squared, _ = target.nearest(source.points @ transform[:3, :3].T + transform[:3, 3])
+    return float(np.mean(squared < inlier_distance**2))
 
 
 def icp_rmse(source, target, transform: np.ndarray, inlier_distance: float) -> float:

@@ -59,7 +59,7 @@ class LoopMatch:
     rmse: float
 
 
-def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance: float) -> IcpFn:
+def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance: float, backend: str) -> IcpFn:
     """An ``icp_fn``: :func:`helpers.icp.refine_icp` with these
     settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
 
@@ -74,16 +74,15 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance
 
     def ready(points):
         if id(points) not in prepared:
-            prepared[id(points)] = (points, icp_cloud(points, with_normals))
+            prepared[id(points)] = (points, icp_cloud(points, with_normals, backend))
         return prepared[id(points)][1]
 
     def icp(moving, fixed, init):
         source, target = ready(moving), ready(fixed)
         if metric == "point-to-point":
             source, target = moving, fixed
-        transform, _ = refine_icp(source, target, init, metric, inlier_distance, max_iterations, tolerance)
-        normals = np.asarray(ready(fixed).cloud.normals)
-        return transform, surface_rmse(moving, fixed, transform, inlier_distance, normals)
+        transform, _ = refine_icp(source, target, init, metric, inlier_distance, max_iterations, tolerance, backend)
+        return transform, surface_rmse(moving, ready(fixed), transform, inlier_distance)
 
     return icp
 
@@ -107,13 +106,22 @@ def surface_rmse(moving: np.ndarray, fixed: np.ndarray, transform: np.ndarray, i
     when they are 1 m out of line (measured: 1.11 m aligned, 0.74 m when
     1 m off). Measured along the normals, the error grows with the
     misalignment (0.33 m aligned, 0.40 m at 1 m, 0.60 m at 3 m).
-    ``normals`` of ``fixed`` may be given when they are already known.
+    ``normals`` of ``fixed`` may be given when they are already known; a
+    ``fixed`` made ready for ICP (:class:`helpers.icp.IcpCloud` with normals)
+    brings its own normals and k-d tree.
     """
-    from scipy.spatial import cKDTree
+    from .icp import IcpCloud
 
     moved = transform_points(moving, transform)
-    distance, nearest = cKDTree(fixed).query(moved, distance_upper_bound=inlier_distance)
-    paired = np.isfinite(distance)
+    if isinstance(fixed, IcpCloud):
+        squared, nearest = fixed.nearest(moved)
+        fixed, normals = fixed.points, fixed.normals
+    else:
+        from scipy.spatial import cKDTree
+
+        distance, nearest = cKDTree(fixed).query(moved, distance_upper_bound=inlier_distance)
+        squared = distance**2
+    paired = squared < inlier_distance**2
     if paired.sum() < SURFACE_NEIGHBORS:
         return float("inf")
     normals = surface_normals(fixed) if normals is None else normals

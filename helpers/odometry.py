@@ -27,8 +27,8 @@ import numpy as np
 from .config import Config, RegistrationConfig
 from .errors import SlamError
 from .features import fpfh, grid_average, match_features
-from .geometry import check_points
-from .icp import IcpCloud, icp_cloud, refine_icp
+from .geometry import check_points, rotation_angle_deg
+from .icp import IcpCloud, icp_cloud, overlap, refine_icp
 from .progress import progress_bar
 from .registration import estimate_rigid_msac
 
@@ -42,7 +42,7 @@ class Frame:
     """One scan, prepared for registration."""
 
     points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
-    features: np.ndarray  # (N, 33) normalised FPFH descriptors
+    features: np.ndarray | None  # (N, 33) normalised FPFH descriptors (None until :func:`describe` when tracking)
     icp_points: np.ndarray  # (M, 3) the cloud ICP works on
     timings: dict  # ms per preparation stage
     icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
@@ -61,6 +61,7 @@ class PairRegistration:
     rmse: float  # m, ICP inlier RMSE
     timings: dict  # ms per stage
     fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
+    tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
 
 
 @dataclass
@@ -75,28 +76,63 @@ class OdometryResult:
     rmse: np.ndarray  # (K-1,) m, ICP RMSE per step
     timings: dict[str, np.ndarray]  # ms per stage and accepted scan, (K,) each; step 0 has no match/msac/icp
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
+    tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
 
 
 def prepare(scan: np.ndarray, config: Config) -> Frame:
-    """Downsample one scan, describe it and make its ICP cloud ready.
+    """Downsample one scan, describe it (not yet in tracking mode: see
+    :func:`describe`) and make its ICP cloud ready.
 
     ``timings`` has the ms of ``downsample``, ``fpfh`` and ``icp`` (the ICP
-    cloud's normals and covariances, paid once per scan).
+    cloud's normals, covariances and k-d tree, paid once per scan).
     """
-    features, registration = config.features, config.registration
+    registration = config.registration
     timings = {}
     start = time.perf_counter()
-    points = grid_average(scan, features.grid_step)
+    points = grid_average(scan, config.features.grid_step)
     icp_step = registration.icp_grid_step
     icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
     timings["downsample"] = _ms(start)
     start = time.perf_counter()
-    descriptors = fpfh(points, features.neighbors)
-    timings["fpfh"] = _ms(start)
-    start = time.perf_counter()
-    icp = icp_cloud(icp_points, registration.metric)
+    icp = icp_cloud(icp_points, registration.metric, registration.icp_backend)
     timings["icp"] = _ms(start)
-    return Frame(points, descriptors, icp_points, timings, icp)
+    frame = Frame(points, None, icp_points, timings, icp)
+    return frame if registration.mode == "tracking" else describe(frame, config)
+
+
+def describe(frame: Frame, config: Config) -> Frame:
+    """Give ``frame`` its FPFH descriptors, once."""
+    if frame.features is None:
+        start = time.perf_counter()
+        frame.features = fpfh(frame.points, config.features.neighbors)
+        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
+    return frame
+
+
+def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray) -> tuple[PairRegistration, str]:
+    """Register ``moving`` onto ``fixed`` by ICP alone, from the last ``motion``
+    (a constant-velocity guess). Returns the registration and, when it cannot
+    be trusted, why: an ICP RMSE above ``icp_fallback_rmse``, a result that
+    jumps more than ``tracking_max_jump_m`` / ``tracking_max_jump_deg`` from the
+    guess, or fewer than ``tracking_min_overlap`` of the points paired."""
+    fit = config.registration
+    start = time.perf_counter()
+    T_fine, rmse = _icp(moving, fixed, motion, fit)
+    jump = np.linalg.inv(motion) @ T_fine
+    jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
+    paired = overlap(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
+    timings = {"icp": _ms(start)}
+    reasons = []
+    if not rmse <= fit.icp_fallback_rmse:
+        reasons.append(f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m")
+    if jump_m > fit.tracking_max_jump_m or jump_deg > fit.tracking_max_jump_deg:
+        reasons.append(f"{jump_m:.2f} m and {jump_deg:.2f} deg from the last motion")
+    if paired < fit.tracking_min_overlap:
+        reasons.append(f"{paired:.0%} of the points paired")
+    none = np.zeros((0, 2), dtype=np.int64)
+    pair = PairRegistration(moving.points, fixed.points, none, np.zeros(0, bool), motion, T_fine, rmse, timings)
+    pair.tracked = True
+    return pair, "; ".join(reasons)
 
 
 def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None):
@@ -147,8 +183,8 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
     """Downsample, describe, match, fit and refine one pair of scans
     (moving -> fixed), returning everything a figure needs."""
     config = config or Config()
-    moving = prepare(check_points(moving_scan, "the moving scan"), config)
-    fixed = prepare(check_points(fixed_scan, "the fixed scan"), config)
+    moving = describe(prepare(check_points(moving_scan, "the moving scan"), config), config)
+    fixed = describe(prepare(check_points(fixed_scan, "the fixed scan"), config), config)
     result = register_frames(moving, fixed, config, guess)
     result.timings = _add(moving.timings, result.timings)
     return result
@@ -176,17 +212,28 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
     n_matches, n_inliers, rmse, fallbacks = [], [], [], []
     timings = {stage: np.zeros(len(indices)) for stage in STAGES}
     previous, motion = None, None
+    tracking, tracked = config.registration.mode == "tracking", []
     bar = progress_bar(len(indices), "odometry", enabled=progress)
     for k, index in enumerate(indices):
-        # 1. Downsample the accepted scan and extract its FPFH descriptors.
+        # 1. Downsample the accepted scan and extract its FPFH descriptors (tracking: only when needed).
         current = prepare(check_points(scans[index], f"scan {index}"), config)
-        for stage, ms in current.timings.items():
-            timings[stage][k] += ms
         if previous is not None:
-            # 2. Register it to the previous accepted scan: match, robust fit, ICP.
-            pair = register_frames(current, previous, config, guess=motion)
+            # 2. Register it to the previous accepted scan: match, robust fit, ICP;
+            #    tracking: ICP from the last motion, the rest only if that fails its checks.
+            pair, doubt = (
+                track_frames(current, previous, config, motion) if tracking and motion is not None else (None, "")
+            )
+            if pair is None or doubt:
+                if pair is not None:
+                    log.info("scan %d: tracking doubtful (%s); registered globally", index, doubt)
+                    timings["icp"][k] += pair.timings["icp"]
+                described = previous.timings.get("fpfh", 0.0)
+                describe(previous, config)  # its time counts here: the previous step was already summed
+                timings["fpfh"][k] += previous.timings.get("fpfh", 0.0) - described
+                pair = register_frames(describe(current, config), previous, config, guess=motion)
             for stage, ms in pair.timings.items():
                 timings[stage][k] += ms
+            tracked.append(pair.tracked)
             if pair.fallback:
                 fallbacks.append((int(index), pair.fallback))
                 log.warning("scan %d: %s", index, pair.fallback)
@@ -197,6 +244,8 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
             n_matches.append(len(pair.matches))
             n_inliers.append(int(pair.inliers.sum()))
             rmse.append(pair.rmse)
+        for stage, ms in current.timings.items():
+            timings[stage][k] += ms
         previous = current
         bar.update(1)
     bar.close()
@@ -209,14 +258,25 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
         rmse=np.array(rmse),
         timings=timings,
         fallbacks=fallbacks,
+        tracked=np.array(tracked, dtype=bool),
     )
 
 
 def _icp(moving: Frame, fixed: Frame, init: np.ndarray, fit: RegistrationConfig) -> tuple[np.ndarray, float]:
     """ICP between the frames' prepared clouds (bare points for a Frame built by hand)."""
-    source = moving.icp if moving.icp is not None and moving.icp.metric == fit.metric else moving.icp_points
-    target = fixed.icp if fixed.icp is not None and fixed.icp.metric == fit.metric else fixed.icp_points
-    return refine_icp(source, target, init, fit.metric, fit.inlier_distance, fit.icp_max_iterations, fit.icp_tolerance)
+    wanted = (fit.metric, fit.icp_backend)
+    source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
+    target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
+    return refine_icp(
+        source,
+        target,
+        init,
+        fit.metric,
+        fit.inlier_distance,
+        fit.icp_max_iterations,
+        fit.icp_tolerance,
+        fit.icp_backend,
+    )
 
 
 def _add(*timings: dict) -> dict:

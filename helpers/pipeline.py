@@ -207,7 +207,9 @@ def _loop_icp(config: Config):
     """The ICP of loop checks and edges back: the odometry's metric and
     inlier distance, the loop closure's iteration cap, scored by surface RMSE."""
     fit = config.registration
-    return icp_with(fit.metric, fit.inlier_distance, config.loop_closure.icp_max_iterations, fit.icp_tolerance)
+    return icp_with(
+        fit.metric, fit.inlier_distance, config.loop_closure.icp_max_iterations, fit.icp_tolerance, fit.icp_backend
+    )
 
 
 def _edges_back(clouds, relative: np.ndarray, config: Config) -> list[Edge]:

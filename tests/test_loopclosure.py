@@ -187,7 +187,8 @@ def open3d_icp(moving, fixed, init):
 
 @pytest.mark.parametrize("icp", ["open3d", "package"])
 def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
-    icp_fn = open3d_icp if icp == "open3d" else icp_with("plane-to-plane", 3.0, 50, Config().registration.icp_tolerance)
+    tolerance = Config().registration.icp_tolerance
+    icp_fn = open3d_icp if icp == "open3d" else icp_with("plane-to-plane", 3.0, 50, tolerance, "small_gicp")
     rng = np.random.default_rng(3)
     truth = np.array([pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)])
     scans = [scan_at(p, rng) for p in truth]

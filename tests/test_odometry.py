@@ -92,3 +92,26 @@ def test_prepared_frames_register_like_bare_ones(flight):
     bare = register_frames(bare_moving, bare_fixed, config)
     np.testing.assert_array_equal(ready.matches, bare.matches)
     np.testing.assert_allclose(ready.T_fine, bare.T_fine, atol=1e-9)
+
+
+def test_tracking_registers_like_the_global_workflow_without_its_features(flight, odometry):
+    """Tracking: ICP from the last motion; the global workflow only for the first step (no motion yet)
+    and where a check fails. Every step stays within the same bound of the truth as the reference's."""
+    tracking = run_odometry(flight, flight.poses[0], Config().with_values(registration=dict(mode="tracking")))
+    truth = np.linalg.inv(flight.poses[tracking.indices[:-1]]) @ flight.poses[tracking.indices[1:]]
+    error = np.linalg.norm(tracking.relative[:, :3, 3] - truth[:, :3, 3], axis=1)
+    assert error.max() < STEP_BOUND_M and tracking.fallbacks == []
+    assert not tracking.tracked[0] and tracking.tracked[1:].mean() > 0.9
+    assert tracking.timings["fpfh"][2:].sum() < odometry.timings["fpfh"][2:].sum() / 5  # few scans described
+    gt = flight.poses[tracking.indices]
+    assert abs(ate(tracking.poses, gt).rmse - ate(odometry.poses, gt).rmse) < 0.2
+
+
+def test_tracking_hands_doubtful_steps_to_the_global_workflow(flight):
+    """With a jump limit no real motion change passes, every step after the first is checked, found
+    doubtful and registered globally: the result equals the reference's odometry."""
+    strict = dict(mode="tracking", tracking_max_jump_m=1e-9, tracking_max_jump_deg=1e-9)
+    doubtful = run_odometry(flight.scans[:30], flight.poses[0], Config().with_values(registration=strict))
+    reference = run_odometry(flight.scans[:30], flight.poses[0], Config())
+    assert not doubtful.tracked.any()
+    np.testing.assert_allclose(doubtful.relative, reference.relative, atol=1e-9)
