@@ -108,13 +108,14 @@ def run_slam(dataset: Dataset, config: Config | None = None, progress: bool = Fa
     start = time.perf_counter()
     step = config.registration.icp_grid_step or config.features.grid_step
     clouds = [grid_average(dataset.scans[i], step) for i in odometry.indices]
-    submaps, queries = submaps_and_loops(clouds, odometry.poses, config, progress)
+    icp = _loop_icp(config)  # one for the loops and the edges back: each cloud is made ready for ICP once
+    submaps, queries = submaps_and_loops(clouds, odometry.poses, config, icp, progress)
     runtime["submaps_and_loop_closure"] = time.perf_counter() - start
 
     # 4. Pose graph: odometry edges, edges to older scans, loop edges, the
     #    first node anchored.
     start = time.perf_counter()
-    extra = _edges_back(clouds, odometry.relative, config)
+    extra = _edges_back(clouds, odometry.relative, config, icp)
     runtime["edges_back"] = time.perf_counter() - start
     start = time.perf_counter()
     graph = build_pose_graph(odometry, extra, [q.closure for q in queries if q.closure], config)
@@ -141,13 +142,13 @@ def run_slam(dataset: Dataset, config: Config | None = None, progress: bool = Fa
     )
 
 
-def submaps_and_loops(clouds, poses, config: Config, progress: bool = False):
+def submaps_and_loops(clouds, poses, config: Config, icp, progress: bool = False):
     """The reference's main loop over the accepted scans (own frames, at their
     odometry ``poses``): add the scan to the current submap (a new one every
     ``n_scans_per_submap`` scans) and, once there are more than
     ``sub_map_thresh`` submaps, query the old ones for a loop.
+    ``icp`` is an ``icp_fn`` of :func:`helpers.loopclosure.icp_with`.
     Returns the submaps and the queries that registered something."""
-    icp = _loop_icp(config)
     submaps = SubmapIndex(config.map.n_scans_per_submap, config.map.align_grid_step)
     queries: list[LoopQuery] = []
     bar = progress_bar(len(clouds), "submaps and loops", enabled=progress)
@@ -212,13 +213,12 @@ def _loop_icp(config: Config):
     )
 
 
-def _edges_back(clouds, relative: np.ndarray, config: Config) -> list[Edge]:
+def _edges_back(clouds, relative: np.ndarray, config: Config, icp) -> list[Edge]:
     """Register every node to the nodes 2 .. ``edges_back`` before it, from
     the chained odometry as the initial guess. Each extra edge measures the
     motion again with other points, so the pose graph can average the
     odometry's random errors instead of summing them. Registrations scored
     above ``rmse_threshold`` are left out."""
-    icp = _loop_icp(config)
     edges = []
     for back in range(2, config.pose_graph.edges_back + 1):
         for j in range(back, len(clouds)):
