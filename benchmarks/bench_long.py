@@ -28,7 +28,7 @@ from helpers.config import Config
 from helpers.pipeline import run_slam
 from helpers.evaluation import run_metrics
 start = time.perf_counter()
-data = helpers.create_dataset(waypoints_path=sys.argv[1])
+data = helpers.create_dataset(waypoints_path=sys.argv[1], lazy=True)
 created = time.perf_counter() - start
 result = run_slam(data, Config().with_values(registration=dict(mode=sys.argv[2])))
 m = run_metrics(data, result)

@@ -26,6 +26,12 @@ def main(argv=None) -> int:
     run = sub.add_parser("run", help="create the dataset and run the whole SLAM pipeline on it")
     _map_arguments(run)
     run.add_argument("--out", required=True, help="output folder (metrics.json, trajectories, map.ply)")
+    run.add_argument(
+        "--reference-values",
+        action="store_true",
+        help="keep the configured values (by default the geometry-dependent ones the config file does not set "
+        "are fitted to the flight's height and waypoint spacing: helpers.fitting)",
+    )
 
     site = sub.add_parser("site", help="execute the notebooks and export them as a static HTML site")
     site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
@@ -76,9 +82,11 @@ def _dataset(args) -> int:
 
 
 def _run(args) -> int:
-    from .configfile import load_config
+    from .configfile import given_keys, load_config
     from .dataset import create_dataset
     from .evaluation import map_errors, run_metrics
+    from .fitting import fit_to_flight, flight_of
+    from .health import assess
     from .output import write_run
     from .pipeline import run_slam
 
@@ -87,6 +95,14 @@ def _run(args) -> int:
     interactive = sys.stderr.isatty()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
     created = time.perf_counter() - start
+    if not args.reference_values:
+        flight = flight_of(data)
+        config, reasons = fit_to_flight(flight, config, given_keys(args.config))
+        print(
+            f"parameters fitted to the flight ({flight.height:.0f} m above the ground, a waypoint every "
+            f"{flight.spacing:.1f} m; --reference-values keeps the reference's):"
+        )
+        print("\n".join(f"  {line}" for line in reasons))
     result = run_slam(data, config, progress=interactive)
     result.runtime_s = {"dataset": created, **result.runtime_s}
     m = run_metrics(data, result, map_errors(result.map_points, data.map_points))
@@ -96,6 +112,10 @@ def _run(args) -> int:
         f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "
         f"{m['ate_rmse_optimized_m']:.2f} m (optimised); {m['runtime_s']['total']:.0f} s; written to {out}"
     )
+    health = assess(result)
+    print(health.summary())
+    if not health.trusted:
+        print(f'warning: {health.warning()} (metrics.json: "trusted": false)', file=sys.stderr)
     return 0
 
 

@@ -156,12 +156,16 @@ class FeaturesConfig(_Table):
     TABLE: ClassVar[str] = "features"
     grid_step: float = _param(1.5, "cell of the grid-average downsampling before features, metres", "gridStep")
     neighbors: int = _param(60, "nearest neighbours for normals and FPFH", "neighbors")
+    keypoint_share: float = _param(
+        1.0, "share of each scan's points, the most tilted, that are described and matched (1: all, the reference)"
+    )
     match_threshold: float = _param(0.1, "largest normalised descriptor distance of a match", "matchThreshold")
     match_ratio: float = _param(0.97, "ratio test: best / second-best distance must be below it", "matchRatio")
 
     def __post_init__(self):
         self._check("grid_step", _positive, "a positive number")
         self._within("neighbors", 3, MAX_NEIGHBORS)
+        self._check("keypoint_share", lambda v: 0 < v <= 1, "in (0, 1]")
         self._check("match_threshold", lambda v: 0 < v <= 1, "in (0, 1]")
         self._check("match_ratio", lambda v: 0 < v <= 1, "in (0, 1]")
 
@@ -248,7 +252,7 @@ class LoopClosureConfig(_Table):
     )
     max_attempts: int = _param(3, "submaps registered at most per query, nearest first")
     max_returned: int = _param(3, "matching submaps kept at most, best first")
-    icp_max_iterations: int = _param(50, "most ICP iterations when checking a submap or an edge back")
+    icp_max_iterations: int = _param(50, "most ICP iterations when checking a submap or a loop edge")
 
     def __post_init__(self):
         for name in ("loop_closure_search_radius", "loop_closure_threshold", "rmse_threshold"):
@@ -275,6 +279,9 @@ class PoseGraphConfig(_Table):
     edges_back: int = _param(
         4, "each scan is also registered to the scans up to this many nodes back (1: the reference)"
     )
+    edges_back_icp_max_iterations: int = _param(
+        15, "most ICP iterations of an edge back (its guess, the chained odometry, is close already)"
+    )
     graph_weights: str = _param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
     edge_sigma_m: float = _param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = _param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
@@ -282,6 +289,7 @@ class PoseGraphConfig(_Table):
 
     def __post_init__(self):
         self._within("edges_back", 1, MAX_EDGES_BACK)
+        self._within("edges_back_icp_max_iterations", 1, MAX_ITERATIONS)
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._check("edge_sigma_m", _positive, "a positive number")
         self._check("edge_sigma_deg", _positive, "a positive number")

@@ -47,6 +47,14 @@ def config_from_dict(data: dict, source: str = "config") -> Config:
     return Config(**tables)
 
 
+def given_keys(path: str | Path | None) -> frozenset[tuple[str, str]]:
+    """The ``(table, key)`` pairs a TOML file sets (none without a file); read after :func:`load_config`."""
+    if path is None:
+        return frozenset()
+    data = tomllib.loads(Path(path).read_text())
+    return frozenset((table, key) for table, values in data.items() for key in values)
+
+
 def config_to_dict(config: Config, tables=STAGE_TABLES) -> dict:
     """The configuration (or some of its tables) as plain nested dictionaries, for JSON or TOML."""
     return {name: _plain(dataclasses.asdict(getattr(config, name))) for name in tables}

@@ -4,6 +4,7 @@ with their ground-truth poses (the reference's ``helperCreateDataset``)."""
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property, lru_cache
 from pathlib import Path
@@ -19,7 +20,7 @@ from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
 from .progress import progress_bar
 from .scene import HeightField, default_scene
-from .sensor import Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
+from .sensor import ScanBatch, Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
 from .trajectory import write_tum
 from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
 
@@ -29,22 +30,59 @@ DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"  # the default flight, 
 MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the reference's 1 m voxels)
 
 
+class LazyScans(Sequence):
+    """The scans of a flight, each cast when it is asked for and not kept:
+    the same points as casting the whole flight at once (each scan's noise
+    has its own seed), in memory that does not grow with the flight."""
+
+    def __init__(self, surface: Surface, poses: np.ndarray, sensor: SensorConfig) -> None:
+        self.surface, self.poses, self.sensor = surface, poses, sensor
+
+    def __len__(self) -> int:
+        return len(self.poses)
+
+    def __getitem__(self, index):
+        if isinstance(index, slice):
+            return [self[i] for i in range(*index.indices(len(self)))]
+        index = range(len(self))[index]  # negative indices; IndexError past the end
+        return self.cast(index, index + 1).scans[0]
+
+    def cast(self, start: int, stop: int, progress=None) -> ScanBatch:
+        """Scans ``start`` to ``stop - 1`` with their true hits."""
+        return cast_scans(self.surface, self.poses[start:stop], self.sensor, progress, first_index=start)
+
+
 @dataclass
 class Dataset:
     """Everything stage 1 produces."""
 
-    scans: list[np.ndarray]  # (Ni, 3) points per scan, sensor frame, m
+    scans: Sequence[np.ndarray]  # (Ni, 3) points per scan, sensor frame, m (a list, or LazyScans)
     poses: np.ndarray  # (N, 4, 4) ground-truth sensor poses in the map frame
     waypoints: np.ndarray  # (N, 3) ground-truth positions (the poses' translations)
-    map_points: np.ndarray  # (M, 3) float32 union of every true (noise-free) hit: the ground-truth map
-    map_labels: np.ndarray  # (M,) class of each map point (see helpers.scene)
     surface: HeightField  # the surface the rays were cast against
     frame: MapFrame  # original map coordinates -> map frame
     sensor: SensorConfig
     name: str
+    truth: ScanBatch | None = None  # the true hits (None until first asked for, with LazyScans)
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    @property
+    def map_points(self) -> np.ndarray:
+        """(M, 3) float32 union of every true (noise-free) hit: the ground-truth map."""
+        return self._truth().hits
+
+    @property
+    def map_labels(self) -> np.ndarray:
+        """(M,) class of each map point (see :mod:`helpers.scene`)."""
+        return self._truth().labels
+
+    def _truth(self) -> ScanBatch:
+        if self.truth is None:  # lazy scans: cast the flight once more, keeping only the hits
+            batch = self.scans.cast(0, len(self.scans))
+            self.truth = ScanBatch([], batch.hits, batch.labels)
+        return self.truth
 
     def scan_in_map(self, index: int) -> np.ndarray:
         """Scan ``index`` moved into the map frame by its ground-truth pose."""
@@ -68,14 +106,19 @@ def _default_surface() -> HeightField:
     return default_scene()
 
 
-def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | None = None, progress=False) -> Dataset:
+def create_dataset(
+    map_path=None, waypoints_path=None, sensor: SensorConfig | None = None, progress=False, lazy=False
+) -> Dataset:
     """Simulate one lidar scan per waypoint.
 
     ``map_path``: a ``.las``/``.laz``, a ``.tar.gz`` holding one, or None for
     the embedded default scene. ``waypoints_path``: ``.mat`` (``gTruthTraj``)
     or ``.csv``, in the map's original coordinates; None flies the default
     loop (the shipped one on the default scene, one fitted to the tile
-    otherwise). ``progress``: show a progress bar while casting.
+    otherwise). ``progress``: show a progress bar while casting. ``lazy``:
+    cast each scan when it is read instead of all now (:class:`LazyScans`,
+    for flights too long to hold; every read casts again, and an empty scan
+    is then found by the step that reads it).
     """
     sensor = sensor or SensorConfig()
     if map_path is None:
@@ -94,9 +137,13 @@ def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | No
     check_coverage(field, xyz)
     sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
+    surface = Surface.from_height_field(field)
+    if lazy:
+        scans = LazyScans(surface, poses, sensor)
+        return Dataset(scans, poses, xyz, field, frame, sensor, name)
     bar = progress_bar(len(poses), "casting scans", enabled=progress)
     try:
-        batch = cast_scans(Surface.from_height_field(field), poses, sensor, bar)
+        batch = cast_scans(surface, poses, sensor, bar)
     finally:
         bar.close()
     empty = np.flatnonzero([len(s) == 0 for s in batch.scans])
@@ -105,17 +152,7 @@ def create_dataset(map_path=None, waypoints_path=None, sensor: SensorConfig | No
             f"{len(empty)} of {len(poses)} scans came back empty (indices {index_ranges(empty)}): "
             "those waypoints see no map within max_range"
         )
-    return Dataset(
-        scans=batch.scans,
-        poses=poses,
-        waypoints=xyz,
-        map_points=batch.hits,
-        map_labels=batch.labels,
-        surface=field,
-        frame=frame,
-        sensor=sensor,
-        name=name,
-    )
+    return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, ScanBatch([], batch.hits, batch.labels))
 
 
 def fitted_loop(field: HeightField, spacing: float = DEFAULT_SPACING) -> np.ndarray:

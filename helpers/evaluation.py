@@ -17,6 +17,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from .geometry import check_points, relative_pose_error
+from .health import assess
 from .metrics import ErrorStats, ate, rpe
 
 log = logging.getLogger(__name__)
@@ -58,7 +59,9 @@ def grade_loops(dataset, result) -> list[GradedLoop]:
 def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
     """The figures of a run, units in the names: counts, ATE and RPE against
     ``dataset.poses`` at the nodes, the graph error, the runtimes and, if
-    given, the map error (:func:`map_errors`)."""
+    given, the map error (:func:`map_errors`). ``trusted`` and ``health``
+    come from the run alone (:func:`helpers.health.assess`)."""
+    health = assess(result)
     poses_gt = dataset.poses[result.indices]
     odometry, optimized = ate(result.poses_odometry, poses_gt), ate(result.poses_optimized, poses_gt)
     rpe_1 = rpe(result.poses_optimized, poses_gt, 1)
@@ -66,6 +69,8 @@ def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
     rpe_10 = rpe(result.poses_optimized, poses_gt, 10) if long_enough else None
     steps = result.odometry.timings
     metrics = {
+        "trusted": health.trusted,
+        "health": {**health.counts, "problems": health.problems},
         "n_scans": result.n_scans,
         "n_accepted": len(result.indices),
         "n_loop_closures": len(result.loops),

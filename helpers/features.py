@@ -61,11 +61,22 @@ def fpfh(points, neighbors: int) -> np.ndarray:
 
     Normals come from the ``neighbors`` nearest points and point up (+z); the
     histograms use the same ``neighbors`` nearest points.
+    :func:`keypoint_fpfh` describes only some of the points.
+    """
+    return keypoint_fpfh(points, neighbors, 1.0)[1]
 
-    Open3D's FPFH is the largest part of a scan's preparation; a numpy
-    version sharing one neighbour query between normals, SPFH and FPFH
-    reproduced its descriptors but was slower (README, measured figures),
-    so Open3D's is kept.
+
+def keypoint_fpfh(points, neighbors: int, share: float) -> tuple[np.ndarray, np.ndarray]:
+    """The :func:`keypoints` of a cloud (indices, ascending) and their
+    :func:`fpfh` descriptors, (K, 33): the descriptors of the other points
+    are never computed.
+
+    Open3D's tensor FPFH is used: on the same normals it gives the legacy
+    ``compute_fpfh_feature``'s descriptors exactly, and it can skip the
+    points that are not keypoints. Either is the largest part
+    of a scan's preparation; a numpy version sharing one neighbour query
+    between normals, SPFH and FPFH reproduced them but was slower (README,
+    measured figures).
     """
     points = check_points(points, "the cloud to describe")
     if neighbors < 3:
@@ -74,9 +85,40 @@ def fpfh(points, neighbors: int) -> np.ndarray:
         raise SlamError(
             f"FPFH with {neighbors} neighbours needs more than {neighbors} points, the cloud has {len(points)}"
         )
-    cloud = to_cloud(points, normals_knn=neighbors)
-    raw = o3d.pipelines.registration.compute_fpfh_feature(cloud, o3d.geometry.KDTreeSearchParamKNN(neighbors))
-    return normalise_descriptors(np.asarray(raw.data).T)
+    cloud = o3d.t.geometry.PointCloud(o3d.core.Tensor(points))
+    cloud.estimate_normals(max_nn=neighbors)
+    cloud.orient_normals_to_align_with_direction(o3d.core.Tensor(UP))
+    chosen = keypoints(cloud.point.normals.numpy(), share)
+    indices = None if len(chosen) == len(points) else o3d.core.Tensor(chosen)
+    raw = o3d.t.pipelines.registration.compute_fpfh_feature(cloud, max_nn=neighbors, indices=indices)
+    return chosen, normalise_descriptors(raw.numpy())
+
+
+def keypoints(normals, share: float) -> np.ndarray:
+    """Indices, ascending, of the ``share`` of points whose surface is most
+    tilted (largest ``1 - |n_z|``; ties keep the lower index); every index
+    when ``share`` is 1.
+
+    Why tilted: seen from 700 m up, flat ground and flat roofs have nearly
+    the same descriptor everywhere, so their matches are mostly wrong or
+    dropped by the ratio test. Matching only the more tilted half of each
+    scan (roof slopes, walls, tree crowns), measured on 55 pairs of the
+    default flight: a third of the matches, more of them right (36 % within
+    1 m of the true partner against 19 %), a quarter of the matching time
+    (it compares every moving descriptor with every fixed one) and the same
+    odometry after ICP (ATE 1.02 m both); but the robust fit, with fewer
+    inliers, lands a little farther from the truth (median point error
+    0.36 m against 0.35 m, up to 0.49 m against 0.29 m on one test pair), so
+    the reference's "every point" stays the default.
+    """
+    normals = np.asarray(normals, dtype=np.float64)
+    if not 0 < share <= 1:
+        raise SlamError(f"the keypoint share must lie in (0, 1], got {share!r}")
+    if share == 1:
+        return np.arange(len(normals))
+    count = max(1, round(share * len(normals)))
+    tilt = 1.0 - np.abs(normals[:, 2])
+    return np.sort(np.argsort(-tilt, kind="stable")[:count])
 
 
 def normalise_descriptors(raw: np.ndarray) -> np.ndarray:

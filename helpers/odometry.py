@@ -1,7 +1,8 @@
 """Stage 3c: lidar odometry, scan to scan, as the reference's registration loop.
 
 Every ``skip_frames``-th scan is *accepted*. Each accepted scan is registered
-to the previous one: grid-average downsampling, FPFH descriptors, descriptor
+to the previous one: grid-average downsampling, FPFH descriptors of its
+keypoints (every point by default: ``[features] keypoint_share``), descriptor
 matching, a robust rigid fit (MSAC) and an ICP refinement. Chaining the
 relative transforms from the first ground-truth pose gives the trajectory.
 
@@ -26,7 +27,7 @@ import numpy as np
 
 from .config import Config, RegistrationConfig
 from .errors import SlamError
-from .features import fpfh, grid_average, match_features
+from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
 from .icp import IcpCloud, icp_cloud, overlap, refine_icp
 from .progress import progress_bar
@@ -42,10 +43,11 @@ class Frame:
     """One scan, prepared for registration."""
 
     points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
-    features: np.ndarray | None  # (N, 33) normalised FPFH descriptors (None until :func:`describe` when tracking)
+    features: np.ndarray | None  # (K, 33) normalised FPFH descriptors of the keypoints (None until :func:`describe`)
     icp_points: np.ndarray  # (M, 3) the cloud ICP works on
     timings: dict  # ms per preparation stage
     icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
+    keypoints: np.ndarray | None = None  # (K,) indices of the points that have descriptors (None: all)
 
 
 @dataclass
@@ -101,10 +103,12 @@ def prepare(scan: np.ndarray, config: Config) -> Frame:
 
 
 def describe(frame: Frame, config: Config) -> Frame:
-    """Give ``frame`` its FPFH descriptors, once."""
+    """Give ``frame`` its FPFH descriptors and keypoints, once."""
     if frame.features is None:
         start = time.perf_counter()
-        frame.features = fpfh(frame.points, config.features.neighbors)
+        frame.keypoints, frame.features = keypoint_fpfh(
+            frame.points, config.features.neighbors, config.features.keypoint_share
+        )
         frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
     return frame
 
@@ -143,9 +147,14 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     features, fit = config.features, config.registration
     timings, fallback = {}, None
 
-    # 1. Match descriptors (current scan = moving, previous scan = fixed).
+    # 1. Match the keypoints' descriptors (current scan = moving, previous scan = fixed).
     start = time.perf_counter()
+    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
+    for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
+        if len(frame.features) != len(chosen):
+            raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
     matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio)
+    matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
     timings["match"] = _ms(start)
 
     # 2. Robust rigid fit on the matched points.
@@ -236,7 +245,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
             tracked.append(pair.tracked)
             if pair.fallback:
                 fallbacks.append((int(index), pair.fallback))
-                log.warning("scan %d: %s", index, pair.fallback)
+                log.info("scan %d: %s", index, pair.fallback)  # counted, and summed up by helpers.health
             # 3. Chain the relative motion onto the previous pose.
             motion = pair.T_fine
             relative.append(motion)

@@ -14,6 +14,7 @@ from the nadir ``theta`` obeys ``cos theta = cos e cos a``.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 import open3d as o3d
@@ -46,6 +47,11 @@ class Surface:
         b, c, d = a + 1, a + nx, a + nx + 1
         triangles = np.stack([np.column_stack([a, b, d]), np.column_stack([a, d, c])], axis=1)
         return cls(field, vertices, triangles.reshape(-1, 3).astype(np.uint32))
+
+    @cached_property
+    def scene(self) -> o3d.t.geometry.RaycastingScene:
+        """The ray-casting scene, built on first use and kept."""
+        return self.raycasting_scene()
 
     def raycasting_scene(self) -> o3d.t.geometry.RaycastingScene:
         scene = o3d.t.geometry.RaycastingScene()
@@ -95,16 +101,18 @@ class ScanBatch:
     labels: np.ndarray  # (sum Ni,) uint8 class of the surface cell each ray hit
 
 
-def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progress=None) -> ScanBatch:
+def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progress=None, first_index=0) -> ScanBatch:
     """Cast the ray pattern from every pose and keep the returns.
 
     Ranges beyond ``max_range`` and misses give no point; each kept range gets
     Gaussian noise and each ray may drop out, from a generator seeded with
-    ``(sensor.seed, scan index)``, so a scan does not depend on the others.
+    ``(sensor.seed, scan index)``, so a scan does not depend on the others:
+    ``poses`` are the flight's scans ``first_index``, ``first_index + 1``, ...,
+    and casting them alone gives the same points as casting the whole flight.
     """
     pattern = ray_pattern(sensor).astype(np.float32)
     k = len(pattern)
-    scene = surface.raycasting_scene()
+    scene = surface.scene
     per_call = max(1, RAYS_PER_CAST // k)
     rays = np.empty((min(per_call, len(poses)), k, 6), np.float32)  # reused by every call
     hits = np.empty((len(poses) * k, 3), np.float32)
@@ -116,7 +124,7 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         batch[..., :3] = chunk[:, None, :3, 3]
         np.matmul(pattern[None], chunk[:, :3, :3].transpose(0, 2, 1).astype(np.float32), out=batch[..., 3:])
         t = scene.cast_rays(o3d.core.Tensor(batch.reshape(-1, 6)))["t_hit"].numpy().reshape(n, k)
-        noise, kept = _noise_and_dropout(sensor, first, n, k)
+        noise, kept = _noise_and_dropout(sensor, first_index + first, n, k)
         ok = (t <= sensor.max_range) & kept  # a miss is inf
         flat = np.flatnonzero(ok)  # flat indices are much faster to gather with than (scan, ray) pairs
         ray_of = flat % k

@@ -149,3 +149,16 @@ def read_ply(path):
     import open3d as o3d
 
     return o3d.t.io.read_point_cloud(str(path)).point.positions.numpy().astype(np.float64)
+
+
+def test_lazy_scans_are_the_same_points_and_truth_as_eager_ones(short_flight):
+    eager = helpers.create_dataset(waypoints_path=short_flight)
+    lazy = helpers.create_dataset(waypoints_path=short_flight, lazy=True)
+    assert len(lazy) == len(eager) and lazy.truth is None  # nothing cast yet
+    for i in (0, 7, len(eager) - 1, -1):
+        np.testing.assert_array_equal(lazy.scans[i], eager.scans[i])
+    assert [len(s) for s in lazy.scans[2:5]] == [len(s) for s in eager.scans[2:5]]
+    np.testing.assert_array_equal(lazy.map_points, eager.map_points)  # cast once more, on first use
+    np.testing.assert_array_equal(lazy.map_labels, eager.map_labels)
+    with pytest.raises(IndexError):
+        lazy.scans[len(eager)]

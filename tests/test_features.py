@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from helpers.errors import SlamError
-from helpers.features import fpfh, grid_average, match_features, normalise_descriptors
+from helpers.features import fpfh, grid_average, keypoint_fpfh, keypoints, match_features, normalise_descriptors
 
 
 def test_grid_average_means_each_cell_in_a_stable_order():
@@ -36,6 +36,23 @@ def test_fpfh_is_normalised_and_rotation_invariant():
     diff = np.abs(fpfh(turned, 30) - f).max(axis=1)
     assert np.mean(diff < 1e-3) > 0.9
     assert diff.max() < 0.1
+
+
+def test_keypoints_are_the_most_tilted_points_and_keep_their_descriptors():
+    rng = np.random.default_rng(4)
+    xy = rng.uniform(-20, 20, (900, 2))
+    roof = np.abs(xy[:, 0]) < 8  # a gabled roof in the middle of flat ground
+    points = np.column_stack([xy, np.where(roof, 10 - 0.8 * np.abs(xy[:, 0]), 0.0)])
+    chosen, descriptors = keypoint_fpfh(points, 20, 0.3)
+    assert len(chosen) == 270 and np.all(np.diff(chosen) > 0)
+    # the slopes, and ground whose 20 neighbours (about 4 m around) reach up the roof's 3.6 m eaves
+    assert np.all(roof[chosen] | (np.abs(xy[chosen, 0]) < 8 + 4)) and roof[chosen].mean() > 0.8
+    np.testing.assert_allclose(descriptors, fpfh(points, 20)[chosen], atol=1e-12)
+    normals = np.array([[0, 0, 1.0], [0, 0.6, 0.8], [1.0, 0, 0], [0, 0, -1.0]])
+    np.testing.assert_array_equal(keypoints(normals, 0.5), [1, 2])
+    np.testing.assert_array_equal(keypoints(normals, 1.0), [0, 1, 2, 3])
+    with pytest.raises(SlamError, match="keypoint share"):
+        keypoints(normals, 0.0)
 
 
 def test_normalisation_makes_histograms_fractions_then_unit_length():

@@ -238,3 +238,22 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
     assert surface[0] < surface[1] < surface[2]
     assert surface[0] < 0.4 and surface[2] > 0.55
     assert point[1] < point[0]  # the reference's measure is fooled here
+
+
+def test_icp_fn_keeps_only_the_recently_used_clouds_ready(monkeypatch):
+    """Clouds are made ready once while recent, and at most PREPARED_CLOUDS are kept (memory on long flights)."""
+    import helpers.icp
+    from helpers import loopclosure
+
+    made = []
+    real = helpers.icp.icp_cloud
+    monkeypatch.setattr(helpers.icp, "icp_cloud", lambda points, *a: made.append(id(points)) or real(points, *a))
+    monkeypatch.setattr(loopclosure, "PREPARED_CLOUDS", 3)
+    icp_fn = icp_with("plane-to-plane", 3.0, 5, 1e-3, "small_gicp")
+    rng = np.random.default_rng(0)
+    clouds = [scan_at(pose(0.0, (0.5 * k, 0.0, 50)), rng) for k in range(5)]
+    for k in range(1, 5):  # a chain: each cloud is moving once and fixed once
+        icp_fn(clouds[k], clouds[k - 1], np.eye(4))
+    assert sorted(made) == sorted(id(c) for c in clouds)  # each made ready once
+    icp_fn(clouds[4], clouds[0], np.eye(4))  # cloud 0 was evicted: made ready again
+    assert made[-1] == id(clouds[0]) and len(made) == 6

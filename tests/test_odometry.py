@@ -87,7 +87,9 @@ def test_prepared_frames_register_like_bare_ones(flight):
     moving, fixed = prepare(flight.scans[9], config), prepare(flight.scans[6], config)
     assert moving.icp is not None and moving.icp.metric == config.registration.metric
     assert set(moving.timings) == {"downsample", "fpfh", "icp"}
-    bare_moving, bare_fixed = (Frame(f.points, f.features, f.icp_points, {}) for f in (moving, fixed))
+    bare_moving, bare_fixed = (
+        Frame(f.points, f.features, f.icp_points, {}, keypoints=f.keypoints) for f in (moving, fixed)
+    )
     ready = register_frames(moving, fixed, config)
     bare = register_frames(bare_moving, bare_fixed, config)
     np.testing.assert_array_equal(ready.matches, bare.matches)

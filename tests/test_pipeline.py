@@ -14,6 +14,7 @@ import helpers
 from helpers.config import Config
 from helpers.configfile import config_to_toml
 from helpers.evaluation import grade_loops, run_metrics
+from helpers.health import assess
 from helpers.output import write_run
 from helpers.pipeline import Edge, build_pose_graph, run_slam
 from helpers.trajectory import read_tum
@@ -66,7 +67,8 @@ def test_same_inputs_same_numbers(short_loop, short_run):
         m.pop("runtime_s")
     assert again.keys() == first.keys()
     for key, value in first.items():
-        assert again[key] == (value if isinstance(value, int) else pytest.approx(value, rel=1e-9, abs=1e-12)), key
+        exact = isinstance(value, int | dict)  # counts, flags and the health counts
+        assert again[key] == (value if exact else pytest.approx(value, rel=1e-9, abs=1e-12)), key
 
 
 # Two runs of the command on one machine: counts equal, real numbers within
@@ -136,6 +138,32 @@ def test_flat_map_falls_back_instead_of_crashing(tmp_path):
     assert len(result.odometry.fallbacks) == len(result.indices) - 1
     assert all("robust fit failed" in reason or "ICP" in reason for _, reason in result.odometry.fallbacks)
     assert np.isfinite(result.poses_optimized).all()
+    # ... and says it cannot be trusted, why, and what to change
+    health = assess(result)
+    assert not health.trusted and health.counts["n_fallbacks"] == len(result.indices) - 1
+    assert "fell back" in health.warning() and "skip_frames" in health.warning()
+    assert run_metrics(data, result)["trusted"] is False
+
+
+def test_a_good_run_is_trusted_and_counts_what_it_left_out(short_loop, short_run):
+    health = assess(short_run)
+    assert health.trusted and health.warning() == "", health.problems
+    c = health.counts
+    assert c["n_steps"] == len(short_run.indices) - 1 and c["n_fallbacks"] == 0
+    edges_back = SHORT.pose_graph.edges_back
+    assert c["n_edges_back_tried"] == sum(min(edges_back, j) - 1 for j in range(2, len(short_run.indices)))
+    assert c["n_edges_back_left_out"] == c["n_edges_back_tried"] - len(short_run.extra_edges)
+    assert c["n_revisits"] > 0 and c["n_revisits_unclosed"] <= c["n_revisits"] / 2  # the loop flies 30 m past its start
+    m = run_metrics(short_loop, short_run)
+    assert m["trusted"] is True and m["health"]["n_loop_queries"] == len(short_run.queries)
+
+
+def test_a_revisit_that_closes_no_loop_is_not_trusted(short_loop):
+    """The same loop with loop candidates required to be older than the whole flight."""
+    result = run_slam(short_loop, Config().with_values(loop_closure=dict(sub_map_thresh=1000)))
+    health = assess(result)
+    assert result.loops == [] and health.counts["n_revisits_unclosed"] == health.counts["n_revisits"] > 0
+    assert not health.trusted and "sub_map_thresh" in health.warning()
 
 
 def test_a_flight_too_short_for_10_step_errors_still_reports(flight_over):

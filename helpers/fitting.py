@@ -1,0 +1,108 @@
+"""Parameters from the flight: the lengths the reference tuned for its own
+flight, scaled to the footprint of another one, with the reasons.
+
+The reference's values fit its flight: about 600 m above the ground, a
+waypoint every 2 m, a strip about 53 m long along the track. Its lengths
+(grid steps, distances, how far back a loop must lie) are footprint lengths
+in disguise, so on a flight ``k`` times as high they are scaled by ``k``,
+never finer than the surface the rays hit (a 1 m height field shows nothing
+finer); counts that stand for distances (``skip_frames``, ``sub_map_thresh``)
+are recomputed from the waypoint spacing. On the reference's own flight every
+value comes out as the reference's.
+
+What is not scaled, and why: the loop search radius and the loop RMSE
+thresholds measure drift and surface noise, not the footprint; descriptor
+and robust-fit counts (neighbours, trials) do not depend on the scale.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Config
+
+# The reference's flight, measured on the shipped default (the values were tuned for it).
+REFERENCE_HEIGHT = 603.0  # m above the ground, median over the waypoints
+REFERENCE_SPACING = 2.0  # m between waypoints
+REFERENCE = Config()  # its values
+REFERENCE_LOOP_AGE = (  # m flown before a place can close a loop: 15 submaps of 3 accepted scans 6 m apart
+    REFERENCE.loop_closure.sub_map_thresh
+    * REFERENCE.map.n_scans_per_submap
+    * REFERENCE.registration.skip_frames
+    * REFERENCE_SPACING
+)
+GRID_ROUNDING = 0.05  # m: fitted grid steps are multiples of this
+
+
+@dataclass(frozen=True)
+class Flight:
+    """What the parameters depend on."""
+
+    height: float  # m above the surface, median over the waypoints
+    spacing: float  # m between waypoints, median
+    surface_cell: float  # m, the resolution of the surface the rays hit
+    strip: float  # m, the scan's length along the track on flat ground at that height
+
+
+def flight_of(dataset) -> Flight:
+    """The :class:`Flight` of a :class:`helpers.dataset.Dataset`."""
+    field = dataset.surface
+    xy = dataset.waypoints[:, :2]
+    j = np.clip(np.rint((xy[:, 0] - field.x0) / field.cell).astype(int), 0, field.shape[1] - 1)
+    i = np.clip(np.rint((xy[:, 1] - field.y0) / field.cell).astype(int), 0, field.shape[0] - 1)
+    height = float(np.median(dataset.waypoints[:, 2] - field.z[i, j]))
+    steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    spacing = float(np.median(steps[steps > 0])) if np.any(steps > 0) else REFERENCE_SPACING
+    start, stop, _ = dataset.sensor.elevation
+    strip = height * (math.tan(math.radians(stop)) - math.tan(math.radians(start)))
+    return Flight(height, spacing, float(field.cell), strip)
+
+
+def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Config, list[str]]:
+    """``config`` with its geometry-dependent values fitted to ``flight``, and
+    one line per value saying what it became and why. ``keep``: the
+    ``(table, key)`` pairs the user set, left as they are."""
+    k = flight.height / REFERENCE_HEIGHT
+    along = flight.spacing / REFERENCE_SPACING  # how much farther apart the waypoints are
+    ref_fit, ref_features = REFERENCE.registration, REFERENCE.features
+
+    def grid(value):  # a multiple of GRID_ROUNDING, written as one (1.5, not 1.5000000000000002)
+        return round(max(1, round(value / GRID_ROUNDING)) * GRID_ROUNDING, 6)
+
+    skip = max(1, round(ref_fit.skip_frames * k / along))
+    grid_step = grid(max(ref_features.grid_step * k, flight.surface_cell))
+    scale = grid_step / ref_features.grid_step  # distances that follow the grid
+    per_submap = config.map.n_scans_per_submap * skip * flight.spacing  # m flown per submap
+    sub_map_thresh = max(1, round(REFERENCE_LOOP_AGE * k / per_submap))
+    wanted = {
+        ("registration", "skip_frames"): (
+            skip,
+            f"accepted scans {skip * flight.spacing:.1f} m apart, {skip * flight.spacing / flight.strip:.0%} of "
+            f"the {flight.strip:.0f} m strip (the reference: {ref_fit.skip_frames * REFERENCE_SPACING:.0f} m)",
+        ),
+        ("features", "grid_step"): (
+            grid_step,
+            f"{k:.2f} x the reference's {ref_features.grid_step} m for a flight {flight.height:.0f} m above the "
+            f"ground, not finer than the {flight.surface_cell:g} m surface",
+        ),
+        ("registration", "icp_grid_step"): (grid(ref_fit.icp_grid_step * scale), "half the grid step"),
+        ("map", "align_grid_step"): (grid(REFERENCE.map.align_grid_step * scale), "0.8 x the grid step"),
+        ("registration", "max_distance"): (round(ref_fit.max_distance * scale, 2), "follows the grid step"),
+        ("registration", "inlier_distance"): (round(ref_fit.inlier_distance * scale, 2), "2 x the grid step"),
+        ("loop_closure", "sub_map_thresh"): (
+            sub_map_thresh,
+            f"a loop candidate lies {sub_map_thresh * per_submap:.0f} m of flight back "
+            f"({k:.2f} x the reference's {REFERENCE_LOOP_AGE:.0f} m)",
+        ),
+    }
+    changes, reasons = {}, []
+    for (table, key), (value, why) in wanted.items():
+        if (table, key) in keep:
+            reasons.append(f"[{table}] {key} = {getattr(getattr(config, table), key)!r}: as given")
+            continue
+        changes.setdefault(table, {})[key] = value
+        reasons.append(f"[{table}] {key} = {value!r}: {why}")
+    return config.with_values(**changes), reasons

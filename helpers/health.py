@@ -1,0 +1,124 @@
+"""Can a run be trusted? What went wrong in it, counted from the run alone
+(no ground truth), and, when it is too much, why in plain words and which
+parameter to change.
+
+A run is *not trusted* when
+
+- more than :data:`MAX_FALLBACK_SHARE` of the odometry steps fell back (the
+  robust fit failed or ICP ended far off), or
+- any step kept an ICP RMSE above ``[registration] icp_fallback_rmse`` (the
+  chain may break there), or
+- the estimated trajectory comes back over places it left and no loop was
+  closed at most of them (the drift then stays in the map).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .sensor import index_ranges
+
+MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
+LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many radii
+
+
+@dataclass
+class Health:
+    """What went wrong in a run, and whether its result can be trusted."""
+
+    counts: dict  # steps, fallbacks, poor steps, loop queries, loops rejected, edges back left out, revisits
+    problems: list[str] = field(default_factory=list)  # one sentence each: what, likely cause, what to change
+
+    @property
+    def trusted(self) -> bool:
+        return not self.problems
+
+    def summary(self) -> str:
+        """One line of counts."""
+        c = self.counts
+        return (
+            f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back, {c['n_poor_steps']} kept a poor ICP fit; "
+            f"{c['n_loops_rejected']} loop candidates rejected; "
+            f"{c['n_edges_back_left_out']} of {c['n_edges_back_tried']} edges back left out"
+        )
+
+    def warning(self) -> str:
+        """The plain warning of an untrusted run ('' when trusted)."""
+        if self.trusted:
+            return ""
+        return "this result cannot be trusted: " + " ".join(self.problems)
+
+
+def assess(result) -> Health:
+    """The :class:`Health` of a :class:`helpers.pipeline.SlamResult`."""
+    config, odometry = result.config, result.odometry
+    fit, loops = config.registration, config.loop_closure
+    steps = len(odometry.relative)
+    fallbacks = [index for index, _ in odometry.fallbacks]
+    poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
+    revisits, unclosed = _revisits(result)
+    counts = {
+        "n_steps": steps,
+        "n_fallbacks": len(fallbacks),
+        "n_poor_steps": len(poor),
+        "n_loop_queries": len(result.queries),
+        "n_loops_rejected": sum(q.closure is None and len(q.submap_ids) > 0 for q in result.queries),
+        "n_edges_back_tried": result.edges_back_tried,
+        "n_edges_back_left_out": result.edges_back_tried - len(result.extra_edges),
+        "n_revisits": revisits,
+        "n_revisits_unclosed": unclosed,
+    }
+    problems = []
+    if steps and len(fallbacks) > MAX_FALLBACK_SHARE * steps:
+        problems.append(
+            f"{len(fallbacks)} of {steps} odometry steps ({len(fallbacks) / steps:.0%}) could not be registered "
+            f"and fell back to the previous motion (scans {_some(fallbacks)}). Likely cause: "
+            "consecutive accepted scans share too little ground (a low flight, a narrow sensor or waypoints far "
+            "apart), or too few points for their descriptors. "
+            + (
+                f"Try [registration] skip_frames = 1 (now {fit.skip_frames})."
+                if fit.skip_frames > 1
+                else f"Try a finer [features] grid_step (now {config.features.grid_step} m), or fly higher."
+            )
+        )
+    if len(poor):
+        problems.append(
+            f"{len(poor)} odometry steps kept an ICP RMSE above {fit.icp_fallback_rmse} m (scans "
+            f"{_some(poor)}): the trajectory may break there. Likely cause: too little overlap or too few "
+            "points. Try a smaller [registration] skip_frames or [features] grid_step."
+        )
+    if revisits >= config.map.n_scans_per_submap and unclosed > revisits / 2:
+        needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
+        problems.append(
+            f"{revisits} accepted scans come back over ground flown earlier, and {unclosed} of them closed no "
+            "loop, so the drift stays in the map. Likely cause: a loop candidate must be older than "
+            f"[loop_closure] sub_map_thresh = {loops.sub_map_thresh} submaps (about {needed} accepted scans), "
+            "or the scans do not match within loop_closure_threshold. Try a smaller sub_map_thresh."
+        )
+    return Health(counts, problems)
+
+
+def _some(indices, shown: int = 6) -> str:
+    """The first ``shown`` runs of ``indices``, as :func:`helpers.sensor.index_ranges` writes them."""
+    runs = index_ranges(np.asarray(indices)).split(", ")
+    return ", ".join(runs) if len(runs) <= shown else ", ".join(runs[:shown]) + ", ..."
+
+
+def _revisits(result) -> tuple[int, int]:
+    """Nodes whose odometry position comes back within the loop search radius of
+    a node left more than ``LEFT_FACTOR`` radii of flight earlier (revisits),
+    and how many of them have no loop edge within that radius of flight."""
+    positions = result.odometry.poses[:, :3, 3]
+    if len(positions) < 3:
+        return 0, 0
+    radius = result.config.loop_closure.loop_closure_search_radius
+    flown = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    near = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2) < radius
+    left = (flown[:, None] - flown[None, :]) > LEFT_FACTOR * radius  # row k flew that far since column i
+    revisit = (near & left).any(axis=1)
+    closed = np.zeros(len(positions), bool)
+    for loop in result.loops:
+        closed |= np.abs(flown - flown[loop.j]) <= LEFT_FACTOR * radius
+    return int(revisit.sum()), int((revisit & ~closed).sum())

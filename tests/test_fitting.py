@@ -1,0 +1,53 @@
+"""Parameters fitted to the flight: the reference's values on the reference's
+flight, the footprint's lengths on another one, and what the user set kept."""
+
+import dataclasses
+
+import pytest
+
+from helpers.config import Config
+from helpers.fitting import REFERENCE_HEIGHT, Flight, fit_to_flight, flight_of
+
+
+def test_the_reference_flight_gets_the_reference_values(default_dataset):
+    flight = flight_of(default_dataset)
+    assert flight.height == pytest.approx(REFERENCE_HEIGHT, abs=1.0) and flight.spacing == pytest.approx(2.0)
+    fitted, reasons = fit_to_flight(flight, Config())
+    assert fitted == Config()
+    assert len(reasons) == 7 and all(line.startswith("[") for line in reasons)
+
+
+def test_a_low_flight_gets_the_footprint_lengths():
+    """A quarter of the height: the strip is a quarter as long, so every scan is
+    accepted; the grid cannot be finer than the 1 m surface; a loop lies a quarter
+    as far back, in submaps of 3 scans 2 m apart."""
+    low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
+    fitted, reasons = fit_to_flight(low, Config())
+    assert fitted.registration.skip_frames == 1
+    assert fitted.features.grid_step == 1.0  # 0.375 m by the height, held at the surface's 1 m
+    assert fitted.registration.icp_grid_step == 0.5 and fitted.map.align_grid_step == 0.8
+    assert fitted.registration.max_distance == pytest.approx(2 / 3, abs=0.01)
+    assert fitted.registration.inlier_distance == 2.0
+    assert fitted.loop_closure.sub_map_thresh == round(270 / 4 / (3 * 1 * 2.0))  # 67.5 m back: 11 submaps
+    assert any("a loop candidate lies 66 m of flight back" in line for line in reasons)
+    # the rest is the reference's
+    untouched = ("neighbors", "match_threshold", "match_ratio")
+    assert all(getattr(fitted.features, k) == getattr(Config().features, k) for k in untouched)
+    assert fitted.loop_closure.loop_closure_search_radius == Config().loop_closure.loop_closure_search_radius
+
+
+def test_a_high_flight_with_sparse_waypoints():
+    high = Flight(height=2 * REFERENCE_HEIGHT, spacing=4.0, surface_cell=1.0, strip=105.0)
+    fitted, _ = fit_to_flight(high, Config())
+    assert fitted.registration.skip_frames == 3  # twice the strip, waypoints twice as far apart
+    assert fitted.features.grid_step == 3.0 and fitted.registration.inlier_distance == 6.0
+    assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
+
+
+def test_what_the_user_set_is_kept():
+    low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
+    mine = Config().with_values(features=dict(grid_step=0.8))
+    fitted, reasons = fit_to_flight(low, mine, keep={("features", "grid_step")})
+    assert fitted.features.grid_step == 0.8 and fitted.registration.skip_frames == 1
+    assert "[features] grid_step = 0.8: as given" in reasons
+    assert dataclasses.replace(fitted, features=mine.features).features == mine.features
