@@ -8,6 +8,12 @@ A run is *not trusted* when
   robust fit failed or ICP ended far off), or
 - any step kept an ICP RMSE above ``[registration] icp_fallback_rmse`` (the
   chain may break there), or
+- more than :data:`MAX_FALLBACK_SHARE` of the steps were registered on ground
+  too flat to pin the motion along it (their ICP ``constraint`` below
+  :data:`WEAK_CONSTRAINT`, :func:`helpers.icp.pairing`), or
+- a loop edge ends more than :data:`FALSE_LOOP_SIGMAS` from where the rest
+  of the graph puts it (a false loop, set aside by a robust kernel or
+  bending the map without one), or
 - the estimated trajectory comes back over places it left and no loop was
   closed at most of them (the drift then stays in the map).
 """
@@ -22,6 +28,10 @@ from .sensor import index_ranges
 
 MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
 LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many radii
+FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation disagrees with the graph
+# (measured: the default's 24 loops end within 1.6 sigmas; on Autzen at 250 m, 15 true loops within 1 and
+# 11 false ones beyond 250)
+WEAK_CONSTRAINT = 0.005  # below this ICP cannot tell a slide along the ground (default flight: never below 0.046)
 
 
 @dataclass
@@ -39,8 +49,10 @@ class Health:
         """One line of counts."""
         c = self.counts
         return (
-            f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back, {c['n_poor_steps']} kept a poor ICP fit; "
-            f"{c['n_loops_rejected']} loop candidates rejected; "
+            f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back, {c['n_poor_steps']} kept a poor ICP fit, "
+            f"{c['n_weak_steps']} lay on ground too flat to pin them; "
+            f"{c['n_loops_rejected']} loop candidates rejected, "
+            f"{c['n_loops_against_graph']} loop edges against the graph; "
             f"{c['n_edges_back_left_out']} of {c['n_edges_back_tried']} edges back left out"
         )
 
@@ -58,13 +70,19 @@ def assess(result) -> Health:
     steps = len(odometry.relative)
     fallbacks = [index for index, _ in odometry.fallbacks]
     poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
+    constraint = getattr(odometry, "constraint", np.zeros(0))
+    weak = result.indices[1:][constraint < WEAK_CONSTRAINT] if len(constraint) == steps else np.zeros(0, int)
     revisits, unclosed = _revisits(result)
+    norms = np.asarray(getattr(result.graph, "loop_whitened_norm", np.zeros(0)))
+    against = [loop for loop, norm in zip(result.loops, norms, strict=False) if norm > FALSE_LOOP_SIGMAS]
     counts = {
         "n_steps": steps,
         "n_fallbacks": len(fallbacks),
         "n_poor_steps": len(poor),
+        "n_weak_steps": len(weak),
         "n_loop_queries": len(result.queries),
         "n_loops_rejected": sum(q.closure is None and len(q.submap_ids) > 0 for q in result.queries),
+        "n_loops_against_graph": len(against),
         "n_edges_back_tried": result.edges_back_tried,
         "n_edges_back_left_out": result.edges_back_tried - len(result.extra_edges),
         "n_revisits": revisits,
@@ -88,6 +106,24 @@ def assess(result) -> Health:
             f"{len(poor)} odometry steps kept an ICP RMSE above {fit.icp_fallback_rmse} m (scans "
             f"{_some(poor)}): the trajectory may break there. Likely cause: too little overlap or too few "
             "points. Try a smaller [registration] skip_frames or [features] grid_step."
+        )
+    if steps and len(weak) > MAX_FALLBACK_SHARE * steps:
+        problems.append(
+            f"{len(weak)} of {steps} odometry steps ({len(weak) / steps:.0%}) were registered on ground too flat "
+            f"to pin the motion along it (scans {_some(weak)}): ICP may slide there, and the trajectory drift "
+            "unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a narrow strip. "
+            "Fly higher, so that each scan sees more relief."
+        )
+    if against:
+        kernel = config.pose_graph.loop_kernel
+        fate = f"set aside by the {kernel} kernel" if kernel != "none" else "bending the map: no robust kernel"
+        pairs = ", ".join(f"{loop.i}-{loop.j}" for loop in against[:4]) + (", ..." if len(against) > 4 else "")
+        problems.append(
+            f"{len(against)} of {len(result.loops)} loop edges (nodes {pairs}) end more than {FALSE_LOOP_SIGMAS:g} "
+            "sigmas from where the rest of the graph puts them: they are most likely false "
+            f"({fate}). "
+            "Likely cause: repetitive or flat ground that matches within the loop thresholds. Try a lower "
+            f"[loop_closure] rmse_threshold (now {loops.rmse_threshold} m)."
         )
     if revisits >= config.map.n_scans_per_submap and unclosed > revisits / 2:
         needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap

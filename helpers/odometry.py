@@ -29,7 +29,7 @@ from .config import Config, RegistrationConfig
 from .errors import SlamError
 from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
-from .icp import IcpCloud, icp_cloud, overlap, refine_icp
+from .icp import IcpCloud, icp_cloud, pairing, refine_icp
 from .progress import progress_bar
 from .registration import estimate_rigid_msac
 
@@ -64,6 +64,7 @@ class PairRegistration:
     timings: dict  # ms per stage
     fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
     tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
+    constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
 
 
 @dataclass
@@ -79,6 +80,7 @@ class OdometryResult:
     timings: dict[str, np.ndarray]  # ms per stage and accepted scan, (K,) each; step 0 has no match/msac/icp
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
     tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
+    constraint: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K-1,) helpers.icp.pairing, per step
 
 
 def prepare(scan: np.ndarray, config: Config) -> Frame:
@@ -124,7 +126,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     T_fine, rmse = _icp(moving, fixed, motion, fit)
     jump = np.linalg.inv(motion) @ T_fine
     jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
-    paired = overlap(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
+    paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
     timings = {"icp": _ms(start)}
     reasons = []
     if not rmse <= fit.icp_fallback_rmse:
@@ -135,7 +137,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
         reasons.append(f"{paired:.0%} of the points paired")
     none = np.zeros((0, 2), dtype=np.int64)
     pair = PairRegistration(moving.points, fixed.points, none, np.zeros(0, bool), motion, T_fine, rmse, timings)
-    pair.tracked = True
+    pair.tracked, pair.constraint = True, constraint
     return pair, "; ".join(reasons)
 
 
@@ -184,8 +186,13 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
         else:
             fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
+    constraint = float("nan")
+    if moving.icp is not None and fixed.icp is not None:
+        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
     timings["icp"] = _ms(start)
-    return PairRegistration(moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback)
+    pair = PairRegistration(moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback)
+    pair.constraint = constraint
+    return pair
 
 
 def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=None) -> PairRegistration:
@@ -221,7 +228,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
     n_matches, n_inliers, rmse, fallbacks = [], [], [], []
     timings = {stage: np.zeros(len(indices)) for stage in STAGES}
     previous, motion = None, None
-    tracking, tracked = config.registration.mode == "tracking", []
+    tracking, tracked, constraint = config.registration.mode == "tracking", [], []
     bar = progress_bar(len(indices), "odometry", enabled=progress)
     for k, index in enumerate(indices):
         # 1. Downsample the accepted scan and extract its FPFH descriptors (tracking: only when needed).
@@ -243,6 +250,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
             for stage, ms in pair.timings.items():
                 timings[stage][k] += ms
             tracked.append(pair.tracked)
+            constraint.append(pair.constraint)
             if pair.fallback:
                 fallbacks.append((int(index), pair.fallback))
                 log.info("scan %d: %s", index, pair.fallback)  # counted, and summed up by helpers.health
@@ -268,6 +276,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
         timings=timings,
         fallbacks=fallbacks,
         tracked=np.array(tracked, dtype=bool),
+        constraint=np.array(constraint, dtype=float),
     )
 
 

@@ -142,6 +142,7 @@ def test_flat_map_falls_back_instead_of_crashing(tmp_path):
     health = assess(result)
     assert not health.trusted and health.counts["n_fallbacks"] == len(result.indices) - 1
     assert "fell back" in health.warning() and "skip_frames" in health.warning()
+    assert health.counts["n_weak_steps"] == len(result.indices) - 1 and "too flat" in health.warning()
     assert run_metrics(data, result)["trusted"] is False
 
 
@@ -149,13 +150,38 @@ def test_a_good_run_is_trusted_and_counts_what_it_left_out(short_loop, short_run
     health = assess(short_run)
     assert health.trusted and health.warning() == "", health.problems
     c = health.counts
-    assert c["n_steps"] == len(short_run.indices) - 1 and c["n_fallbacks"] == 0
+    assert c["n_steps"] == len(short_run.indices) - 1 and c["n_fallbacks"] == 0 and c["n_weak_steps"] == 0
     edges_back = SHORT.pose_graph.edges_back
     assert c["n_edges_back_tried"] == sum(min(edges_back, j) - 1 for j in range(2, len(short_run.indices)))
     assert c["n_edges_back_left_out"] == c["n_edges_back_tried"] - len(short_run.extra_edges)
     assert c["n_revisits"] > 0 and c["n_revisits_unclosed"] <= c["n_revisits"] / 2  # the loop flies 30 m past its start
     m = run_metrics(short_loop, short_run)
     assert m["trusted"] is True and m["health"]["n_loop_queries"] == len(short_run.queries)
+
+
+def test_a_loop_edge_the_graph_disagrees_with_is_reported_as_likely_false(short_run):
+    """A wrong loop edge (5 m and 10 degrees off) added to a good run: the Cauchy
+    kernel sets it aside, and the health check names it without the ground truth."""
+    import dataclasses
+
+    true_loop = short_run.loops[0]
+    wrong = Edge(true_loop.i, true_loop.j, true_loop.relative @ _transform_z(10.0, [5.0, 0.0, 0.0]), 0.1)
+    queries = [*short_run.queries, dataclasses.replace(short_run.queries[-1], closure=wrong)]
+    loops = [q.closure for q in queries if q.closure]
+    graph = build_pose_graph(short_run.odometry, short_run.extra_edges, loops, SHORT)
+    optimized = graph.optimize(anchor_pose=short_run.poses_odometry[0], loop_kernel="cauchy")
+    health = assess(dataclasses.replace(short_run, queries=queries, graph=optimized))
+    assert health.counts["n_loops_against_graph"] == 1 and not health.trusted
+    assert f"{wrong.i}-{wrong.j}" in health.warning() and "cauchy kernel" in health.warning()
+    assert assess(short_run).counts["n_loops_against_graph"] == 0
+
+
+def _transform_z(yaw_deg, shift):
+    out = np.eye(4)
+    c, s = np.cos(np.radians(yaw_deg)), np.sin(np.radians(yaw_deg))
+    out[:2, :2] = [[c, -s], [s, c]]
+    out[:3, 3] = shift
+    return out
 
 
 def test_a_revisit_that_closes_no_loop_is_not_trusted(short_loop):

@@ -224,3 +224,22 @@ def test_register_pair_recovers_a_known_transform_on_real_scans(flight, yaw, shi
     coarse_dt, coarse_dr = _errors(result.T_coarse, truth)
     assert coarse_dt < 3.0 and coarse_dr < 1.0
     assert result.inliers.sum() >= 20
+
+
+def test_pairing_says_how_well_the_pairs_pin_a_translation():
+    """A plane cannot pin a slide along it (constraint about 0); three faces
+    that look three ways pin all of it; the overlap is the share paired."""
+    from helpers.icp import pairing
+
+    rng = np.random.default_rng(8)
+    plane = np.column_stack([rng.uniform(-20, 20, (3000, 2)), rng.normal(0, 0.01, 3000)])
+    flat = icp_cloud(plane, "plane-to-plane", "small_gicp")
+    share, constraint = pairing(flat, flat, _transform(0.0, [1.0, 0.0, 0.0]), 3.0)
+    assert share == 1.0 and constraint < 1e-3
+    a, b = rng.uniform(0, 10, (2, 1000))
+    corner = np.concatenate([np.column_stack(c) for c in ((a, b, 0 * a), (a, 0 * a, b), (0 * a, a, b))])
+    box = icp_cloud(corner, "plane-to-plane", "small_gicp")
+    share, constraint = pairing(box, box, np.eye(4), 3.0)
+    assert share == 1.0 and constraint > 0.5
+    far = pairing(box, box, _transform(0.0, [50.0, 0.0, 0.0]), 3.0)
+    assert far == (0.0, 0.0)  # nothing paired
