@@ -51,9 +51,7 @@ def flight_of(dataset) -> Flight:
     """The :class:`Flight` of a :class:`helpers.dataset.Dataset`."""
     field = dataset.surface
     xy = dataset.waypoints[:, :2]
-    j = np.clip(np.rint((xy[:, 0] - field.x0) / field.cell).astype(int), 0, field.shape[1] - 1)
-    i = np.clip(np.rint((xy[:, 1] - field.y0) / field.cell).astype(int), 0, field.shape[0] - 1)
-    height = float(np.median(dataset.waypoints[:, 2] - field.z[i, j]))
+    height = float(np.median(dataset.waypoints[:, 2] - field.z[field.cell_of(xy)]))
     steps = np.linalg.norm(np.diff(xy, axis=0), axis=1)
     spacing = float(np.median(steps[steps > 0])) if np.any(steps > 0) else REFERENCE_SPACING
     start, stop, _ = dataset.sensor.elevation

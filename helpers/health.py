@@ -70,11 +70,10 @@ def assess(result) -> Health:
     steps = len(odometry.relative)
     fallbacks = [index for index, _ in odometry.fallbacks]
     poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
-    constraint = getattr(odometry, "constraint", np.zeros(0))
-    weak = result.indices[1:][constraint < WEAK_CONSTRAINT] if len(constraint) == steps else np.zeros(0, int)
+    weak = result.indices[1:][odometry.constraint < WEAK_CONSTRAINT]
     revisits, unclosed = _revisits(result)
-    norms = np.asarray(getattr(result.graph, "loop_whitened_norm", np.zeros(0)))
-    against = [loop for loop, norm in zip(result.loops, norms, strict=False) if norm > FALSE_LOOP_SIGMAS]
+    norms = result.graph.loop_whitened_norm
+    against = [loop for loop, norm in zip(result.loops, norms, strict=True) if norm > FALSE_LOOP_SIGMAS]
     counts = {
         "n_steps": steps,
         "n_fallbacks": len(fallbacks),

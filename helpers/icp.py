@@ -220,11 +220,6 @@ def _ready(cloud, what: str, metric: str, backend: str) -> IcpCloud:
     return icp_cloud(check_points(cloud, what, minimum=SAMPLE_SIZE), metric, backend)
 
 
-def overlap(source: IcpCloud, target: IcpCloud, transform: np.ndarray, inlier_distance: float) -> float:
-    """Share of ``source``'s points that ``transform`` brings within ``inlier_distance`` (m) of ``target``."""
-    return pairing(source, target, transform, inlier_distance)[0]
-
-
 def pairing(source: IcpCloud, target: IcpCloud, transform: np.ndarray, inlier_distance: float):
     """``(overlap, constraint)`` of a registration, from one nearest-neighbour pass.
 

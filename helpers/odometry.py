@@ -136,8 +136,18 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     if paired < fit.tracking_min_overlap:
         reasons.append(f"{paired:.0%} of the points paired")
     none = np.zeros((0, 2), dtype=np.int64)
-    pair = PairRegistration(moving.points, fixed.points, none, np.zeros(0, bool), motion, T_fine, rmse, timings)
-    pair.tracked, pair.constraint = True, constraint
+    pair = PairRegistration(
+        moving.points,
+        fixed.points,
+        none,
+        np.zeros(0, bool),
+        motion,
+        T_fine,
+        rmse,
+        timings,
+        tracked=True,
+        constraint=constraint,
+    )
     return pair, "; ".join(reasons)
 
 
@@ -190,9 +200,9 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     if moving.icp is not None and fixed.icp is not None:
         constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
     timings["icp"] = _ms(start)
-    pair = PairRegistration(moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback)
-    pair.constraint = constraint
-    return pair
+    return PairRegistration(
+        moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback, constraint=constraint
+    )
 
 
 def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=None) -> PairRegistration:

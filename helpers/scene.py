@@ -52,6 +52,13 @@ class HeightField:
         ny, nx = self.z.shape
         return np.meshgrid(self.x0 + self.cell * np.arange(nx), self.y0 + self.cell * np.arange(ny))
 
+    def cell_of(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row and column (i, j) of the cell whose centre is nearest each XY point (N, 2+), clipped to the grid."""
+        ny, nx = self.z.shape
+        j = np.clip(np.rint((xy[:, 0] - self.x0) / self.cell).astype(int), 0, nx - 1)
+        i = np.clip(np.rint((xy[:, 1] - self.y0) / self.cell).astype(int), 0, ny - 1)
+        return i, j
+
     def points(self) -> np.ndarray:
         """The valid cell centres as an (N, 3) array."""
         x, y = self.grid()

@@ -156,10 +156,7 @@ def _noise_and_dropout(sensor: SensorConfig, first: int, n: int, k: int):
 
 
 def _labels_at(field: HeightField, points: np.ndarray) -> np.ndarray:
-    ny, nx = field.shape
-    j = np.clip(np.rint((points[:, 0] - field.x0) / field.cell).astype(int), 0, nx - 1)
-    i = np.clip(np.rint((points[:, 1] - field.y0) / field.cell).astype(int), 0, ny - 1)
-    return field.labels[i, j]
+    return field.labels[field.cell_of(points)]
 
 
 def check_coverage(field: HeightField, waypoints: np.ndarray) -> None:

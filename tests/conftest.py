@@ -41,6 +41,32 @@ def autzen():
 
 
 @pytest.fixture()
+def grid_tile(tmp_path):
+    """``grid_tile(name, half_x, half_y, height)``: a LAS tile of one point per m²
+    on a regular grid, z = ``height(x, y)``, written into ``tmp_path``."""
+    import laspy
+
+    def write(name, half_x, half_y, height):
+        x, y = np.meshgrid(np.arange(-half_x, half_x, 1.0), np.arange(-half_y, half_y, 1.0))
+        las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
+        las.header.scales = [0.01, 0.01, 0.01]
+        las.x, las.y, las.z = x.ravel(), y.ravel(), height(x.ravel(), y.ravel())
+        las.write(tmp_path / name)
+        return tmp_path / name
+
+    return write
+
+
+@pytest.fixture()
+def flat_plane(grid_tile, tmp_path):
+    """A featureless plane 100 m up (600 x 400 m) and a 30-waypoint straight flight over it: (tile, waypoints)."""
+    tile = grid_tile("flat.las", 300.0, 200.0, lambda x, y: np.full(x.size, 100.0))
+    flight = tmp_path / "flight.csv"
+    np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
+    return tile, flight
+
+
+@pytest.fixture()
 def short_flight(tmp_path):
     """A 40-waypoint straight flight over the default scene, as a CSV file."""
     xy = np.column_stack([np.arange(-40.0, 40.0, 2.0), np.full(40, 10.0)])

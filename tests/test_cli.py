@@ -114,22 +114,14 @@ def test_reference_values_are_the_defaults():
     assert np.isclose(sensor.range_noise, 0.02)
 
 
-def test_an_untrusted_run_warns_once_and_says_so_in_the_metrics(tmp_path):
+def test_an_untrusted_run_warns_once_and_says_so_in_the_metrics(flat_plane, tmp_path):
     """Over a featureless plane every step falls back: the run still writes its
     outputs and exits 0, with one warning naming the cause and the parameter."""
     import json
 
-    import laspy
-
-    x, y = np.meshgrid(np.arange(-300.0, 300.0, 1.0), np.arange(-200.0, 200.0, 1.0))
-    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
-    las.header.scales = [0.01, 0.01, 0.01]
-    las.x, las.y, las.z = x.ravel(), y.ravel(), np.full(x.size, 100.0)
-    las.write(tmp_path / "flat.las")
-    flight = tmp_path / "flight.csv"
-    np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
+    tile, flight = flat_plane
     out = tmp_path / "run"
-    result = run("run", "--map", str(tmp_path / "flat.las"), "--waypoints", str(flight), "--out", str(out))
+    result = run("run", "--map", str(tile), "--waypoints", str(flight), "--out", str(out))
     assert result.returncode == 0, result.stderr
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
     assert len(warnings) == 1 and "cannot be trusted" in warnings[0] and "skip_frames" in warnings[0]
@@ -140,21 +132,15 @@ def test_an_untrusted_run_warns_once_and_says_so_in_the_metrics(tmp_path):
     assert metrics["trusted"] is False and metrics["health"]["n_fallbacks"] == 9
 
 
-def test_run_fits_the_parameters_to_a_low_flight_unless_told_not_to(tmp_path):
+def test_run_fits_the_parameters_to_a_low_flight_unless_told_not_to(grid_tile, tmp_path):
     """150 m above a plane: every scan accepted, the grid at the 1 m surface, and
     config.toml holds what was used; --reference-values keeps the reference's."""
-    import laspy
-
-    x, y = np.meshgrid(np.arange(-150.0, 150.0, 1.0), np.arange(-100.0, 100.0, 1.0))
-    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
-    las.header.scales = [0.01, 0.01, 0.01]
-    las.x, las.y, las.z = x.ravel(), y.ravel(), 0.3 * np.sin(x.ravel() / 7) * np.cos(y.ravel() / 5)
-    las.write(tmp_path / "low.las")
+    tile = grid_tile("low.las", 150.0, 100.0, lambda x, y: 0.3 * np.sin(x / 7) * np.cos(y / 5))
     flight = tmp_path / "flight.csv"
     np.savetxt(flight, np.column_stack([np.arange(-20.0, 20.0, 2.0), np.zeros(20)]), delimiter=",")
     config = tmp_path / "mine.toml"
     config.write_text("[sensor]\naltitude = 150.0\n[map]\nalign_grid_step = 1.0\n")
-    common = ("run", "--map", str(tmp_path / "low.las"), "--waypoints", str(flight), "--config", str(config))
+    common = ("run", "--map", str(tile), "--waypoints", str(flight), "--config", str(config))
     fitted = run(*common, "--out", str(tmp_path / "fitted"))
     assert fitted.returncode == 0, fitted.stderr
     assert "[registration] skip_frames = 1:" in fitted.stdout

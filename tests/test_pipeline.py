@@ -6,7 +6,6 @@ import subprocess
 import sys
 from types import SimpleNamespace
 
-import laspy
 import numpy as np
 import pytest
 
@@ -123,17 +122,10 @@ def test_no_loop_possible_ends_with_odometry_only(short_loop):
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
 
 
-def test_flat_map_falls_back_instead_of_crashing(tmp_path):
+def test_flat_map_falls_back_instead_of_crashing(flat_plane):
     """Over a featureless plane nothing can be registered: every step is
     recorded as a fallback, and the run still ends with a result."""
-    x, y = np.meshgrid(np.arange(-300.0, 300.0, 1.0), np.arange(-200.0, 200.0, 1.0))
-    las = laspy.LasData(laspy.LasHeader(point_format=3, version="1.2"))
-    las.header.scales = [0.01, 0.01, 0.01]
-    las.x, las.y, las.z = x.ravel(), y.ravel(), np.full(x.size, 100.0)
-    las.write(tmp_path / "flat.las")
-    flight = tmp_path / "flight.csv"
-    np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
-    data = helpers.create_dataset(tmp_path / "flat.las", flight)
+    data = helpers.create_dataset(*flat_plane)
     result = run_slam(data, Config())
     assert len(result.odometry.fallbacks) == len(result.indices) - 1
     assert all("robust fit failed" in reason or "ICP" in reason for _, reason in result.odometry.fallbacks)
