@@ -312,6 +312,11 @@ class Config:
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     pose_graph: PoseGraphConfig = field(default_factory=PoseGraphConfig)
 
+    @classmethod
+    def reference(cls) -> Config:
+        """The reference workflow exactly: the defaults with each of our changes undone."""
+        return cls().with_values(**REFERENCE_WORKFLOW)
+
     def with_values(self, **tables: dict) -> Config:
         """A copy with some values changed: ``config.with_values(features={"grid_step": 1.0})``."""
         return dataclasses.replace(
@@ -319,6 +324,12 @@ class Config:
         )
 
 
+# Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
+REFERENCE_WORKFLOW = {
+    "registration": {"icp_grid_step": 0.0},
+    "loop_closure": {"loop_search_growth": 0.0},
+    "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
+}
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order
 
 
