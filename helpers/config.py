@@ -253,6 +253,10 @@ class LoopClosureConfig(_Table):
     max_attempts: int = _param(3, "submaps registered at most per query, nearest first")
     max_returned: int = _param(3, "matching submaps kept at most, best first")
     icp_max_iterations: int = _param(50, "most ICP iterations when checking a submap or a loop edge")
+    min_constraint: float = _param(
+        0.005,
+        "a loop edge must pin the motion: ICP's weakest over strongest direction at least this (0: the reference)",
+    )
 
     def __post_init__(self):
         for name in ("loop_closure_search_radius", "loop_closure_threshold", "rmse_threshold"):
@@ -262,6 +266,7 @@ class LoopClosureConfig(_Table):
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
+        self._check("min_constraint", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
 
 
 @dataclass(frozen=True)
@@ -327,7 +332,7 @@ class Config:
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
     "registration": {"icp_grid_step": 0.0},
-    "loop_closure": {"loop_search_growth": 0.0},
+    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order

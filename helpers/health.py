@@ -38,7 +38,7 @@ WEAK_CONSTRAINT = 0.005  # below this ICP cannot tell a slide along the ground (
 class Health:
     """What went wrong in a run, and whether its result can be trusted."""
 
-    counts: dict  # steps, fallbacks, poor steps, loop queries, loops rejected, edges back left out, revisits
+    counts: dict  # steps, fallbacks, poor steps, loop queries, loops rejected (too flat), edges back left out, revisits
     problems: list[str] = field(default_factory=list)  # one sentence each: what, likely cause, what to change
 
     @property
@@ -51,7 +51,7 @@ class Health:
         return (
             f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back, {c['n_poor_steps']} kept a poor ICP fit, "
             f"{c['n_weak_steps']} lay on ground too flat to pin them; "
-            f"{c['n_loops_rejected']} loop candidates rejected, "
+            f"{c['n_loops_rejected']} loop candidates rejected ({c['n_loops_too_flat']} on ground too flat), "
             f"{c['n_loops_against_graph']} loop edges against the graph; "
             f"{c['n_edges_back_left_out']} of {c['n_edges_back_tried']} edges back left out"
         )
@@ -81,6 +81,9 @@ def assess(result) -> Health:
         "n_weak_steps": len(weak),
         "n_loop_queries": len(result.queries),
         "n_loops_rejected": sum(q.closure is None and len(q.submap_ids) > 0 for q in result.queries),
+        "n_loops_too_flat": sum(
+            q.closure is None and q.best_scan_constraint < loops.min_constraint for q in result.queries
+        ),
         "n_loops_against_graph": len(against),
         "n_edges_back_tried": result.edges_back_tried,
         "n_edges_back_left_out": result.edges_back_tried - len(result.extra_edges),

@@ -66,7 +66,9 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance
     settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
 
     The function takes ``iterations`` as a fourth, optional argument: another
-    cap than ``max_iterations`` for one call.
+    cap than ``max_iterations`` for one call. Its ``constraint(moving, fixed,
+    transform)`` says how well a registration's pairs pin the translation
+    (:func:`helpers.icp.pairing`).
 
     The same scans and submaps are registered again and again, so a cloud
     is made ready for ICP (:func:`helpers.icp.icp_cloud`) once while it is
@@ -74,7 +76,7 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance
     score too. The bound keeps memory flat on long flights: a prepared cloud
     takes about 1.5 MB, 8 times its points.
     """
-    from .icp import icp_cloud, refine_icp
+    from .icp import icp_cloud, pairing, refine_icp
 
     prepared = OrderedDict()  # id(points) -> (points, IcpCloud), least recently used first; points keep the id unique
     with_normals = metric if metric != "point-to-point" else "point-to-plane"  # the score needs normals
@@ -97,6 +99,11 @@ def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance
         transform, _ = refine_icp(source, target, init, metric, inlier_distance, cap, tolerance, backend)
         return transform, surface_rmse(moving, ready(fixed), transform, inlier_distance)
 
+    def constraint(moving, fixed, transform):
+        """How well the pairs of a registration pin its translation (:func:`helpers.icp.pairing`)."""
+        return pairing(ready(moving), ready(fixed), transform, inlier_distance)[1]
+
+    icp.constraint = constraint
     return icp
 
 

@@ -58,6 +58,7 @@ class LoopQuery:
     scores: np.ndarray  # their RMSE, m
     best_scan_rmse: float  # RMSE of the best scan-to-scan match (inf if no submap matched)
     closure: Edge | None  # the accepted loop edge, if any
+    best_scan_constraint: float = float("nan")  # how well that match pins the motion (icp.pairing; nan: not measured)
 
 
 @dataclass
@@ -184,14 +185,19 @@ def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp,
     if not len(candidates.tried_ids):
         return None
 
-    # 2. The best scan-to-scan match of the matching submaps becomes the loop edge.
-    closure, best = None, float("inf")
+    # 2. The best scan-to-scan match of the matching submaps becomes the loop edge,
+    #    if it fits and pins the motion: on flat ground any slide fits as well.
+    closure, best, pinned = None, float("inf"), float("nan")
     if len(candidates.ids):
         match = best_scan_registration(cloud, node, candidates, clouds, poses, config.map.n_scans_per_submap, icp)
         best = match.rmse
         if match.rmse < loops.rmse_threshold:
-            log.info("loop edge %d -> %d, ICP RMSE %.3f m", match.i, match.j, match.rmse)
-            closure = Edge(match.i, match.j, match.relative_pose, match.rmse)
+            pinned = icp.constraint(cloud, clouds[match.i], match.relative_pose)
+            if not pinned < loops.min_constraint:  # nan (not measured) passes
+                log.info("loop edge %d -> %d, ICP RMSE %.3f m", match.i, match.j, match.rmse)
+                closure = Edge(match.i, match.j, match.relative_pose, match.rmse)
+            else:
+                log.info("loop %d -> %d left out: ground too flat (constraint %.4f)", match.i, match.j, pinned)
     return LoopQuery(
         node=node,
         n_submaps=len(submaps),
@@ -203,6 +209,7 @@ def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp,
         scores=candidates.scores,
         best_scan_rmse=best,
         closure=closure,
+        best_scan_constraint=pinned,
     )
 
 

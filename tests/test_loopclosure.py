@@ -257,3 +257,40 @@ def test_icp_fn_keeps_only_the_recently_used_clouds_ready(monkeypatch):
     assert sorted(made) == sorted(id(c) for c in clouds)  # each made ready once
     icp_fn(clouds[4], clouds[0], np.eye(4))  # cloud 0 was evicted: made ready again
     assert made[-1] == id(clouds[0]) and len(made) == 6
+
+
+@pytest.mark.parametrize("ground", ["terrain", "flat"])
+def test_a_loop_on_ground_too_flat_to_pin_it_is_left_out(ground):
+    """Over flat ground ICP slides to any offset with the same low RMSE: the
+    best scan match fits but cannot be a loop edge. Over terrain the same
+    revisit becomes the edge, at the true relative pose."""
+    from helpers.pipeline import _loop_icp, loop_query
+
+    height = terrain if ground == "terrain" else (lambda x, y: np.zeros_like(x))
+    rng = np.random.default_rng(5)
+
+    def scan(true_pose):
+        xy = true_pose[:2, 3] + rng.uniform(-15.0, 15.0, (4000, 2))
+        world = np.column_stack([xy, height(xy[:, 0], xy[:, 1]) + rng.normal(0, 0.02, len(xy))])
+        return (world - true_pose[:3, 3]) @ true_pose[:3, :3]
+
+    truth = [pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)]
+    config = Config().with_values(loop_closure={"sub_map_thresh": 0})
+    icp, scans = _loop_icp(config), [scan(p) for p in truth]
+    index = SubmapIndex(config.map.n_scans_per_submap, config.map.align_grid_step)
+    for cloud, true_pose in zip(scans, truth, strict=True):
+        index.add_scan(cloud, true_pose)
+    revisit = pose(2.0, (3.5, 1.5, 50))  # back over scans 1-2
+    drifted = pose(2.0 + np.radians(2), (5.0, 0.5, 50.5))  # the odometry's guess
+    cloud = scan(revisit)
+    index.add_scan(cloud, drifted)
+    query = loop_query(6, cloud, drifted, index, [*scans, cloud], [*truth, drifted], icp, config)
+    assert query.best_scan_rmse < config.loop_closure.rmse_threshold  # the match fits either way
+    if ground == "flat":
+        assert query.best_scan_constraint < config.loop_closure.min_constraint
+        assert query.closure is None
+    else:
+        assert query.best_scan_constraint > 4 * config.loop_closure.min_constraint
+        edge = query.closure
+        expected = np.linalg.inv(truth[edge.i]) @ revisit
+        assert np.linalg.norm(edge.relative[:3, 3] - expected[:3, 3]) < 0.1

@@ -58,6 +58,35 @@ def test_tile_without_waypoints_gets_a_fitted_loop(autzen):
     assert np.median(distance) < 0.05
 
 
+def test_the_scans_of_a_real_tile_lie_on_its_points(autzen):
+    """A sparse real tile (about 1.8 points per m², with a river where few
+    pulses came back) becomes a surface the rays hit where the tile has points:
+    no true hit is farther from a point of the tile than the filled gap
+    allows, and the hits on cells that hold points lie on them as closely as
+    the tile's own spacing."""
+    from scipy.spatial import cKDTree
+
+    from helpers.dataset import MAP_CELL
+
+    tile = read_map(autzen)
+    data = helpers.create_dataset(autzen, sensor=helpers.SensorConfig(altitude=280.0))  # about 150 m above ground
+    hits, field = data.map_points[::7].astype(float), data.surface  # a seventh of them: enough, and quick
+    cell, max_gap = MAP_CELL, 3.0  # the height field's cell and its filled gap (height_field_from_points)
+    # Horizontally: a filled cell is at most max_gap from a cell with points, and each point and hit is within
+    # half a cell diagonal of its own cell's centre.
+    across, _ = cKDTree(tile.points[:, :2]).query(hits[:, :2])
+    assert across.max() <= max_gap + np.sqrt(2) * cell
+    # Hits on cells that hold a point of the tile lie on its points.
+    held = np.zeros(field.shape, bool)
+    held[field.cell_of(tile.points)] = True
+    on_points = held[field.cell_of(hits)]
+    assert on_points.mean() > 0.5
+    distance, _ = cKDTree(tile.points).query(hits[on_points])
+    spacing = np.median(cKDTree(tile.points).query(tile.points, k=2)[0][:, 1])
+    assert np.median(distance) < spacing
+    assert np.percentile(distance, 95) < np.sqrt(2) * cell
+
+
 def test_first_surface_height_field_keeps_the_highest_point_per_cell():
     points = np.array([[0.2, 0.2, 1.0], [0.7, 0.4, 5.0], [1.5, 0.5, 2.0], [0.5, 1.5, 3.0], [1.5, 1.5, 4.0]])
     field = height_field_from_points(points, np.zeros(5, np.uint8), cell=1.0)

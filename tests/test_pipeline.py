@@ -147,6 +147,9 @@ def test_a_good_run_is_trusted_and_counts_what_it_left_out(short_loop, short_run
     assert c["n_edges_back_tried"] == sum(min(edges_back, j) - 1 for j in range(2, len(short_run.indices)))
     assert c["n_edges_back_left_out"] == c["n_edges_back_tried"] - len(short_run.extra_edges)
     assert c["n_revisits"] > 0 and c["n_revisits_unclosed"] <= c["n_revisits"] / 2  # the loop flies 30 m past its start
+    assert c["n_loops_too_flat"] == 0 and all(
+        q.best_scan_constraint >= SHORT.loop_closure.min_constraint for q in short_run.queries if q.closure
+    )
     m = run_metrics(short_loop, short_run)
     assert m["trusted"] is True and m["health"]["n_loop_queries"] == len(short_run.queries)
 

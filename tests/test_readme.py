@@ -1,9 +1,10 @@
 """The README's configuration table says what the code says."""
 
 import re
+import tomllib
 from pathlib import Path
 
-from helpers.config import NOISE_SEED_VARIABLE, STAGE_TABLES, Config, describe
+from helpers.config import NOISE_SEED_VARIABLE, REFERENCE_WORKFLOW, STAGE_TABLES, Config, describe
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 
@@ -30,3 +31,11 @@ def test_the_configuration_table_lists_every_parameter_with_its_default(monkeypa
             shown = f'"{default}"' if isinstance(default, str) else str(default)
             expected[table, name] = (shown, reference or "")
     assert readme_rows() == expected
+
+
+def test_the_reference_config_file_is_the_reference_workflow():
+    """The README's TOML for the reference's workflow holds exactly what ``Config.reference()`` changes."""
+    block = re.search(r"is one\s+config away.*?```toml\n(.*?)```", README.read_text(), re.S)
+    assert block, "the README shows no TOML block"
+    assert tomllib.loads(block.group(1)) == REFERENCE_WORKFLOW
+    assert Config.reference() == Config().with_values(**REFERENCE_WORKFLOW)
