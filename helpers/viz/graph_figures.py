@@ -9,12 +9,14 @@ from matplotlib.collections import LineCollection
 from .style import COLORS, grid, segments, xy_of
 
 
-def loop_arcs(a, b, bend: float = 0.35, points: int = 24) -> np.ndarray:
+def loop_arcs(a, b, bend: float = 0.25, points: int = 24) -> np.ndarray:
     """(L, points, 2) arcs from ``a`` to ``b`` (top view) bulging sideways by
-    ``bend`` times their length: visible even where the two ends lie on the
-    same line."""
+    ``bend`` times their length, all towards +y (or +x for chords along y):
+    visible even where the two ends lie on the same line."""
     a, b = np.asarray(a, float)[:, :2], np.asarray(b, float)[:, :2]
     side = (b - a) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # the chord turned by 90 degrees
+    flip = (side[:, 1] < 0) | ((side[:, 1] == 0) & (side[:, 0] < 0))
+    side[flip] *= -1
     control = (a + b) / 2 + bend * side
     t = np.linspace(0, 1, points)[None, :, None]
     return (1 - t) ** 2 * a[:, None] + 2 * (1 - t) * t * control[:, None] + t**2 * b[:, None]
@@ -58,20 +60,25 @@ def chain_figure(truth, odometry, optimized, closed_form=None):
 
 
 def iterations_figure(errors, lambdas=None, title="Levenberg-Marquardt, step by step"):
-    """The graph error after each iteration (log scale), and the damping
-    lambda the optimiser used, if given."""
+    """The graph error after each iteration and, in a second panel, how far
+    it still is above its final value (log scale) with the damping lambda
+    the optimiser used, if given."""
     errors = np.asarray(errors, float)
     steps = np.arange(len(errors))
-    fig, ax = plt.subplots(figsize=(7, 3.4), constrained_layout=True)
-    ax.semilogy(steps, errors, "-o", color=COLORS["optimized"], label="graph error")
-    ax.set(xlabel="iteration (0 = the initial guess)", ylabel="graph error", xticks=steps, title=title)
-    grid(ax)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    left.plot(steps, errors, "-o", color=COLORS["optimized"])
+    left.set(xlabel="iteration (0 = the initial guess)", ylabel="graph error", xticks=steps, ylim=(0, None))
+    left.set_title(title)
+    excess = errors[:-1] - errors[-1]
+    shown = excess > 0
+    label = "graph error above its final value"
+    right.semilogy(steps[:-1][shown], excess[shown], "-o", color=COLORS["optimized"], label=label)
     if lambdas is not None:
-        right = ax.twinx()
         right.semilogy(steps, np.asarray(lambdas, float), "s--", color="#6a3d9a", ms=4, label="damping lambda")
-        right.set_ylabel("damping lambda", color="#6a3d9a")
-        lines = ax.get_legend_handles_labels()[0] + right.get_legend_handles_labels()[0]
-        ax.legend(lines, [h.get_label() for h in lines], fontsize=9)
+    right.set(xlabel="iteration", xticks=steps, title="how fast it settles (log scale)")
+    right.legend(fontsize=9)
+    for ax in (left, right):
+        grid(ax)
     return fig
 
 
