@@ -9,6 +9,79 @@ from matplotlib.collections import LineCollection
 from .style import COLORS, grid, segments, xy_of
 
 
+def loop_arcs(a, b, bend: float = 0.25, points: int = 24) -> np.ndarray:
+    """(L, points, 2) arcs from ``a`` to ``b`` (top view) bulging sideways by
+    ``bend`` times their length, all towards +y (or +x for chords along y):
+    visible even where the two ends lie on the same line."""
+    a, b = np.asarray(a, float)[:, :2], np.asarray(b, float)[:, :2]
+    side = (b - a) @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # the chord turned by 90 degrees
+    flip = (side[:, 1] < 0) | ((side[:, 1] == 0) & (side[:, 0] < 0))
+    side[flip] *= -1
+    control = (a + b) / 2 + bend * side
+    t = np.linspace(0, 1, points)[None, :, None]
+    return (1 - t) ** 2 * a[:, None] + 2 * (1 - t) * t * control[:, None] + t**2 * b[:, None]
+
+
+def chain_figure(truth, odometry, optimized, closed_form=None):
+    """The 1-D chain: positions on the line (top: truth, odometry, optimised,
+    with the loop edge from the first node to the last as an arc) and, below,
+    each node's error before and after, and the correction the loop brought."""
+    truth, odometry, optimized = (np.asarray(v, float) for v in (truth, odometry, optimized))
+    nodes = np.arange(len(truth))
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 5.4), constrained_layout=True, height_ratios=(1, 1.4))
+    for row, (name, x, color) in enumerate(
+        (
+            ("truth", truth, COLORS["ground_truth"]),
+            ("odometry", odometry, COLORS["odometry"]),
+            ("optimised", optimized, COLORS["optimized"]),
+        )
+    ):
+        y = np.full_like(x, -row)
+        top.plot(x, y, "-o", color=color, ms=6, lw=1.5)
+        top.text(x[0] - 0.02 * np.ptp(truth), -row, name, ha="right", va="center", color=color)
+    xs = np.linspace(optimized[0], optimized[-1], 60)  # the loop edge: an arc under the optimised row
+    half = (optimized[-1] - optimized[0]) / 2
+    arc = -2 - 0.8 * (1 - ((xs - optimized[0] - half) / half) ** 2)
+    top.plot(xs, arc, color=COLORS["loop"], lw=2)
+    top.text(xs[30], -2.85, "loop edge: first node to last", color=COLORS["loop"], ha="center", va="top")
+    top.set(xlabel="position on the line (m)", yticks=[], ylim=(-3.6, 0.6), title="a chain of poses on a line")
+    top.set_xlim(truth[0] - 0.15 * np.ptp(truth), truth[-1] + 0.05 * np.ptp(truth))
+    grid(top)
+    bottom.plot(nodes, odometry - truth, "-o", color=COLORS["odometry"], label="error of the odometry")
+    bottom.plot(nodes, optimized - truth, "-o", color=COLORS["optimized"], label="error after least squares")
+    bottom.bar(nodes, optimized - odometry, width=0.35, color=COLORS["loop"], alpha=0.6, label="correction")
+    if closed_form is not None:
+        bottom.plot(nodes, np.asarray(closed_form, float) - odometry, "k--", lw=1, label="correction, closed form")
+    bottom.axhline(0, color="black", lw=0.8)
+    bottom.set(xlabel="node", ylabel="metres", xticks=nodes)
+    grid(bottom)
+    bottom.legend(fontsize=9, loc="lower left")
+    return fig
+
+
+def iterations_figure(errors, lambdas=None, title="Levenberg-Marquardt, step by step"):
+    """The graph error after each iteration and, in a second panel, how far
+    it still is above its final value (log scale) with the damping lambda
+    the optimiser used, if given."""
+    errors = np.asarray(errors, float)
+    steps = np.arange(len(errors))
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    left.plot(steps, errors, "-o", color=COLORS["optimized"])
+    left.set(xlabel="iteration (0 = the initial guess)", ylabel="graph error", xticks=steps, ylim=(0, None))
+    left.set_title(title)
+    excess = errors[:-1] - errors[-1]
+    shown = excess > 0
+    label = "graph error above its final value"
+    right.semilogy(steps[:-1][shown], excess[shown], "-o", color=COLORS["optimized"], label=label)
+    if lambdas is not None:
+        right.semilogy(steps, np.asarray(lambdas, float), "s--", color="#6a3d9a", ms=4, label="damping lambda")
+    right.set(xlabel="iteration", xticks=steps, title="how fast it settles (log scale)")
+    right.legend(fontsize=9)
+    for ax in (left, right):
+        grid(ax)
+    return fig
+
+
 def pose_graph_figure(poses, loop_pairs, every: int = 1, inset=None, inset_at=(0.42, 0.2, 0.42, 0.6)):
     """The pose graph drawn on its initial (odometry) poses: nodes as dots,
     odometry edges as a red line, loop edges in orange. ``inset`` =
@@ -77,7 +150,9 @@ def trajectories_figure(
     inset_at=(0.42, 0.2, 0.42, 0.6),
 ):
     """Top view of the three trajectories in their colours, loop edges
-    drawn on the optimised one; ``inset`` = (xmin, xmax, ymin, ymax) zooms."""
+    drawn on the optimised one, on top, as arcs with dots at both ends (a
+    straight segment would run along the track and hide under it);
+    ``inset`` = (xmin, xmax, ymin, ymax) zooms."""
     gt, odo, opt = xy_of(ground_truth), xy_of(odometry), xy_of(optimized)
     pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
     fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
@@ -86,17 +161,12 @@ def trajectories_figure(
         axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=3, label="ground truth")
         axis.plot(odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.6, label="odometry only")
         axis.plot(opt[:, 0], opt[:, 1], color=COLORS["optimized"], lw=1.6, label="after optimisation")
-        if len(pairs):
-            axis.add_collection(
-                LineCollection(
-                    segments(opt[pairs[:, 0]], opt[pairs[:, 1]]),
-                    colors=COLORS["loop"],
-                    linewidths=1.2,
-                    alpha=0.7,
-                    zorder=1,
-                    label="loop edges",
-                )
-            )
+        if len(pairs):  # on top, as arcs: both ends of a loop edge lie on the same stretch of track
+            arcs = loop_arcs(opt[pairs[:, 0]], opt[pairs[:, 1]])
+            axis.add_collection(LineCollection(arcs, colors=COLORS["loop"], linewidths=1.8, zorder=5))
+            ends = opt[pairs.ravel()]
+            axis.plot(ends[:, 0], ends[:, 1], "o", color=COLORS["loop"], ms=3.5, zorder=6)
+            axis.plot([], [], "o-", color=COLORS["loop"], ms=3.5, lw=1.8, label="loop edges (drawn as arcs)")
 
     draw(ax)
     ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
