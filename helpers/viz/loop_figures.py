@@ -310,5 +310,5 @@ def loop_errors_figure(error_m, error_deg, limits=(FALSE_LOOP_M, FALSE_LOOP_DEG)
         ylim=(low_y, high_y),
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=9, loc="lower right")
     return fig
