@@ -44,3 +44,18 @@ def test_false_loop(capsys):
     assert not check_false_loop(poses_gt, right, 0.5, 0.5, False)  # the distance
     assert not check_false_loop(poses_gt, right, None, 0.5, False)
     assert capsys.readouterr().out.count("not yet:") == 3
+
+
+def test_fixed_radius(monkeypatch, capsys):
+    import helpers.exercises.loops as loops
+
+    monkeypatch.setattr(loops, "fixed_radius_loops", lambda result, end: [210, 211])
+    result = SimpleNamespace(loops=[SimpleNamespace(j=j) for j in (206, 207, 210, 211, 230)])
+    assert loops.check_fixed_radius(result, 212, [211, 210])
+    assert "misses" in capsys.readouterr().out
+    result.loops = result.loops[2:]
+    assert loops.check_fixed_radius(result, 212, [210, 211])
+    assert "finds every" in capsys.readouterr().out
+    assert not loops.check_fixed_radius(result, 212, [206, 207, 210, 211])
+    assert not loops.check_fixed_radius(result, 212, None)
+    assert capsys.readouterr().out.count("not yet:") == 2

@@ -6,6 +6,8 @@ recorded, the simulator's true poses) and prints one line.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from ..errors import SlamError
@@ -63,3 +65,40 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
     if false:
         return report(True, f"outside {limits} of the truth: a false loop edge", "")
     return report(True, f"within {limits} of the truth: a right loop edge", "")
+
+
+def fixed_radius_loops(result, end: int) -> list[int]:
+    """The nodes 0 .. ``end`` of ``result`` that close a loop when the
+    search radius does not grow (``loop_search_growth = 0``, the reference's
+    fixed radius): the pipeline's own loop (:func:`helpers.pipeline.submaps_and_loops`)
+    run again on the run's scans and odometry poses."""
+    from ..loopclosure import icp_with
+    from ..pipeline import submaps_and_loops
+
+    config = result.config
+    fixed = replace(config, loop_closure=replace(config.loop_closure, loop_search_growth=0.0))
+    fit = config.registration
+    icp = icp_with(
+        fit.metric, fit.inlier_distance, fixed.loop_closure.icp_max_iterations, fit.icp_tolerance, fit.icp_backend
+    )
+    _, queries = submaps_and_loops(result.clouds[: end + 1], result.poses_odometry[: end + 1], fixed, icp)
+    return [q.closure.j for q in queries if q.closure is not None]
+
+
+def check_fixed_radius(result, end: int, nodes) -> bool:
+    """Exercise 5.3: the nodes 0 .. ``end`` that still close a loop with the reference's fixed radius."""
+    if unanswered(nodes):
+        return report(False, "", "fill in the list of nodes (the j of each loop edge found)")
+    truth = fixed_radius_loops(result, end)
+    answer = sorted(int(j) for j in np.asarray(nodes, int).ravel())
+    if answer == sorted(truth):
+        grown = {loop.j for loop in result.loops if loop.j <= end}
+        if grown - set(truth):
+            return report(True, "the fixed radius misses loop closures that the grown one finds in this stretch", "")
+        return report(True, "the fixed radius finds every loop closure of this stretch", "")
+    return report(
+        False,
+        "",
+        "run the loop of 5.4 with dataclasses.replace(settings, loop_search_growth=0.0) over nodes 0 .. end "
+        "and list the node j of every loop edge it finds",
+    )
