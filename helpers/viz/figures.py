@@ -24,7 +24,7 @@ from .loop_figures import (
     search_radius_figure,
 )
 from .style import WINDOW
-from .submap_figures import query_cost_figure, recent_rule_figure, submap_centres_figure, submap_panels
+from .submap_figures import recent_rule_figure, submap_centres_figure, submap_merge_figure, submap_panels
 
 __all__ = [
     "WINDOW",
@@ -37,13 +37,13 @@ __all__ = [
     "pose_graph_figure",
     "position_errors_figure",
     "queries_figure",
-    "query_cost_figure",
     "query_search",
     "recent_rule_figure",
     "revisits",
     "rmse_offsets_figure",
     "search_radius_figure",
     "submap_centres_figure",
+    "submap_merge_figure",
     "submap_panels",
     "trajectories_figure",
 ]

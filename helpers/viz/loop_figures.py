@@ -278,25 +278,37 @@ def queries_figure(nodes, tried, best, accepted, thresholds: dict):
 
 def loop_errors_figure(error_m, error_deg, limits=(FALSE_LOOP_M, FALSE_LOOP_DEG)):
     """Each accepted loop edge's error against the ground truth: translation
-    (m) against rotation (deg), with the box inside which a loop counts as right."""
-    fig, ax = plt.subplots(figsize=(6.5, 4), constrained_layout=True)
-    ax.add_patch(plt.Rectangle((0, 0), *limits, color=COLORS["ground_truth"], alpha=0.12, label="counted as right"))
-    ax.scatter(
-        error_m,
-        error_deg,
-        s=36,
-        color=COLORS["loop"],
-        edgecolor="black",
-        lw=0.5,
-        zorder=3,
-        label=f"loop edges ({len(error_m)})",
+    (m) against rotation (deg), both on log scales so that errors a hundred
+    times below the limits still spread out; the limits of a false loop are
+    the dashed lines, and the shaded box is where a loop counts as right."""
+    error_m, error_deg = np.asarray(error_m, float), np.asarray(error_deg, float)
+    floor = 1e-4  # an error of exactly 0 has no place on a log axis: draw it at the floor
+    x, y = np.maximum(error_m, floor), np.maximum(error_deg, floor)
+    low_x = 10 ** np.floor(np.log10(min(x.min(initial=limits[0]), limits[0]) / 2))
+    low_y = 10 ** np.floor(np.log10(min(y.min(initial=limits[1]), limits[1]) / 2))
+    high_x, high_y = 4 * max(limits[0], x.max(initial=0)), 4 * max(limits[1], y.max(initial=0))
+    fig, ax = plt.subplots(figsize=(7, 4.4), constrained_layout=True)
+    ax.add_patch(
+        plt.Rectangle(
+            (low_x, low_y),
+            limits[0] - low_x,
+            limits[1] - low_y,
+            color=COLORS["ground_truth"],
+            alpha=0.12,
+            label="counted as right",
+        )
     )
+    ax.axvline(limits[0], color="black", ls="--", lw=1.2, label=f"false beyond {limits[0]:g} m ...")
+    ax.axhline(limits[1], color="black", ls=":", lw=1.2, label=f"... or {limits[1]:g} deg")
+    ax.scatter(x, y, s=36, color=COLORS["loop"], edgecolor="black", lw=0.5, zorder=3, label=f"loop edges ({len(x)})")
     ax.set(
-        xlabel="translation error (m)",
-        ylabel="rotation error (deg)",
-        xlim=(0, 1.15 * max(limits[0], np.max(error_m, initial=0))),
-        ylim=(0, 1.15 * max(limits[1], np.max(error_deg, initial=0))),
+        xscale="log",
+        yscale="log",
+        xlabel="translation error (m, log scale)",
+        ylabel="rotation error (deg, log scale)",
+        xlim=(low_x, high_x),
+        ylim=(low_y, high_y),
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="upper right")
+    ax.legend(fontsize=9, loc="lower right")
     return fig

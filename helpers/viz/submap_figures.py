@@ -84,10 +84,12 @@ def submap_centres_figure(ground_truth, odometry, centres, scan_points=None, lab
     return fig
 
 
-def recent_rule_figure(centres, position, n_excluded: int, radius: float, title: str):
+def recent_rule_figure(centres, position, n_excluded: int, radius: float, title: str, base_radius: float | None = None):
     """Top view of the submap centres at one moment of the flight: the
     ``n_excluded`` newest (never candidates) in light grey, the older ones
-    (eligible) in black, the current position and the search radius."""
+    (eligible) in black, the current position and the search ``radius`` the
+    query used (orange); ``base_radius``, when given, is drawn dashed (the
+    reference's fixed radius)."""
     c = xy_of(centres)
     eligible = c[: max(0, len(c) - n_excluded)]
     excluded = c[len(eligible) :]
@@ -96,25 +98,57 @@ def recent_rule_figure(centres, position, n_excluded: int, radius: float, title:
     ax.scatter(*eligible.T, s=22, color="black", zorder=3, label=f"eligible ({len(eligible)} oldest)")
     ax.scatter(*excluded.T, s=30, color="white", edgecolor=GREY, zorder=3, label=f"too recent ({len(excluded)} newest)")
     ax.plot(*position[:2], "*", color=COLORS["odometry"], ms=16, zorder=4, label="the drone now")
-    ax.add_patch(Circle(position[:2], radius, fill=False, color=COLORS["loop"], lw=2, zorder=4, label="search radius"))
+    label = f"search radius of the query, {radius:.0f} m"
+    ax.add_patch(Circle(position[:2], radius, fill=False, color=COLORS["loop"], lw=2, zorder=4, label=label))
+    if base_radius is not None:
+        ax.add_patch(
+            Circle(
+                position[:2],
+                base_radius,
+                fill=False,
+                color="black",
+                ls="--",
+                lw=1.2,
+                zorder=4,
+                label=f"the reference's fixed radius, {base_radius:g} m",
+            )
+        )
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
     ax.legend(loc="center", fontsize=9)
     return fig
 
 
-def query_cost_figure(n_scans, n_submaps, points_per_scan, points_per_submap):
-    """Two bars each: how many clouds a query could register against, and
-    how many points each of them holds, for scans and for submaps."""
-    fig, axes = plt.subplots(1, 2, figsize=(9, 3.2), constrained_layout=True)
-    names = ["scans", "submaps"]
-    colors = [GREY, COLORS["loop"]]
-    for ax, values, title in (
-        (axes[0], [n_scans, n_submaps], "clouds to register against"),
-        (axes[1], [points_per_scan, points_per_submap], "points per cloud (median)"),
-    ):
-        bars = ax.bar(names, values, color=colors, width=0.6)
-        ax.bar_label(bars, fmt="%d", padding=2)
-        ax.set(title=title, ylim=(0, 1.18 * max(values)))
-        grid(ax)
+def submap_merge_figure(scans_worth, turn_deg, n_scans_per_submap: int, turn_limit: float = 5.0):
+    """What the merge keeps, submap by submap: the submap's points counted
+    in scans' worth (its points over the median points of a scan), against
+    the submap id, marked where the drone turned by more than ``turn_limit``
+    degrees across the submap's scans (``turn_deg``). The lines at 1 and at
+    ``n_scans_per_submap`` are a single scan and the scans merely stacked."""
+    worth, turn = np.asarray(scans_worth, float), np.asarray(turn_deg, float)
+    ids = np.arange(len(worth))
+    turning = turn > turn_limit
+    fig, ax = plt.subplots(figsize=(10, 3.8), constrained_layout=True)
+    ax.axhline(n_scans_per_submap, color="black", ls="--", lw=1.2, label=f"{n_scans_per_submap} scans stacked")
+    ax.axhline(1.0, color=GREY, ls=":", lw=1.2, label="one scan")
+    ax.plot(ids, worth, color=LIGHT, lw=1, zorder=1)
+    ax.scatter(ids[~turning], worth[~turning], s=20, color="black", zorder=3, label="straight flight")
+    ax.scatter(
+        ids[turning],
+        worth[turning],
+        s=30,
+        color=COLORS["loop"],
+        edgecolor="black",
+        lw=0.5,
+        zorder=3,
+        label=f"turning (over {turn_limit:g} deg across the submap)",
+    )
+    ax.set(
+        xlabel="submap",
+        ylabel="points, in scans' worth",
+        ylim=(0, n_scans_per_submap + 0.4),
+        title="what the grid merge keeps of overlapping scans",
+    )
+    grid(ax)
+    ax.legend(fontsize=9, loc="center right", bbox_to_anchor=(1.0, 0.62))
     return fig

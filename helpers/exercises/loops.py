@@ -1,0 +1,104 @@
+"""Checks for the exercises of notebook 5 (loop closure).
+
+Each check reads the truth from the run it is given (the radius a query
+recorded, the simulator's true poses) and prints one line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import SlamError
+from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
+from ..geometry import relative_pose_error
+from . import report, unanswered
+
+
+def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
+    """Exercise 5.1: the search radius (m) around submap ``submap_id`` in the
+    loop query of ``node``, as the pipeline recorded it (``LoopQuery.radius``)."""
+    if unanswered(radius):
+        return report(False, "", "fill in the radius, in metres")
+    query = next((q for q in result.queries if q.node == node), None)
+    if query is None:
+        raise SlamError(f"node {node} ran no loop query that registered a submap: choose a node of result.queries")
+    truth = float(query.radius[submap_id])
+    if abs(float(radius) - truth) < 0.05:
+        base = result.config.loop_closure.loop_closure_search_radius
+        grown = "more than twice" if truth > 2 * base else "more than"
+        return report(True, f"the search around submap {submap_id} had grown to {grown} the fixed {base:g} m", "")
+    return report(
+        False,
+        "",
+        "add up the path from the submap's centre through every later centre to the drone's odometry position, "
+        "then r = loop_closure_search_radius + loop_search_growth * that distance",
+    )
+
+
+def loop_edge_error(poses_gt, edge) -> tuple[float, float]:
+    """How far a loop edge (``i``, ``j``, ``relative``) is from the true
+    relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg)."""
+    truth = np.linalg.inv(poses_gt[edge.i]) @ poses_gt[edge.j]
+    error_m, error_deg = relative_pose_error(truth, edge.relative)
+    return float(error_m), float(error_deg)
+
+
+def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
+    """Exercise 5.2: the translation (m) and rotation (deg) error of ``edge``
+    against the truth, and whether it counts as a false loop edge."""
+    if any(unanswered(a) for a in (error_m, error_deg, is_false)):
+        return report(False, "", "fill in the two errors and the verdict (True or False)")
+    true_m, true_deg = loop_edge_error(poses_gt, edge)
+    if not (abs(float(error_m) - true_m) < 0.01 and abs(float(error_deg) - true_deg) < 0.01):
+        return report(
+            False,
+            "",
+            "the error transform is inv(true relative pose) @ edge.relative, with the true relative pose "
+            "inv(poses_gt[i]) @ poses_gt[j]; its translation's length and its rotation angle are the errors",
+        )
+    false = true_m > FALSE_LOOP_M or true_deg > FALSE_LOOP_DEG
+    if bool(is_false) != false:
+        return report(False, "", f"an edge is false beyond {FALSE_LOOP_M:g} m OR beyond {FALSE_LOOP_DEG:g} deg")
+    limits = f"{FALSE_LOOP_M:g} m and {FALSE_LOOP_DEG:g} deg"
+    if false:
+        return report(True, f"outside {limits} of the truth: a false loop edge", "")
+    return report(True, f"within {limits} of the truth: a right loop edge", "")
+
+
+def fixed_radius_loops(result, end: int) -> list[int]:
+    """The nodes 0 .. ``end`` of ``result`` that close a loop when the
+    search radius does not grow (``loop_search_growth = 0``, the reference's
+    fixed radius): the pipeline's own loop (:func:`helpers.pipeline.submaps_and_loops`)
+    run again on the run's scans and odometry poses."""
+    from ..loopclosure import icp_with
+    from ..pipeline import submaps_and_loops
+
+    config = result.config
+    fixed = replace(config, loop_closure=replace(config.loop_closure, loop_search_growth=0.0))
+    fit = config.registration
+    icp = icp_with(
+        fit.metric, fit.inlier_distance, fixed.loop_closure.icp_max_iterations, fit.icp_tolerance, fit.icp_backend
+    )
+    _, queries = submaps_and_loops(result.clouds[: end + 1], result.poses_odometry[: end + 1], fixed, icp)
+    return [q.closure.j for q in queries if q.closure is not None]
+
+
+def check_fixed_radius(result, end: int, nodes) -> bool:
+    """Exercise 5.3: the nodes 0 .. ``end`` that still close a loop with the reference's fixed radius."""
+    if unanswered(nodes):
+        return report(False, "", "fill in the list of nodes (the j of each loop edge found)")
+    truth = fixed_radius_loops(result, end)
+    answer = sorted(int(j) for j in np.asarray(nodes, int).ravel())
+    if answer == sorted(truth):
+        grown = {loop.j for loop in result.loops if loop.j <= end}
+        if grown - set(truth):
+            return report(True, "the fixed radius misses loop closures that the grown one finds in this stretch", "")
+        return report(True, "the fixed radius finds every loop closure of this stretch", "")
+    return report(
+        False,
+        "",
+        "run the loop of 5.4 with dataclasses.replace(settings, loop_search_growth=0.0) over nodes 0 .. end "
+        "and list the node j of every loop edge it finds",
+    )
