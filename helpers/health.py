@@ -15,7 +15,10 @@ A run is *not trusted* when
   of the graph puts it (a false loop, set aside by a robust kernel or
   bending the map without one), or
 - the estimated trajectory comes back over places it left and no loop was
-  closed at most of them (the drift then stays in the map).
+  closed at most of them (the drift then stays in the map), or
+- the loop edges moved the trajectory by more than :data:`MAX_CORRECTION_SHARE`
+  of the distance flown: the odometry drifted that much, and between the
+  places where loops closed the optimised trajectory keeps part of it.
 """
 
 from __future__ import annotations
@@ -31,6 +34,9 @@ LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this 
 FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation disagrees with the graph
 # (measured: the default's 24 loops end within 1.6 sigmas; on Autzen at 250 m, 15 true loops within 1 and
 # 11 false ones beyond 250)
+MAX_CORRECTION_SHARE = 0.01  # loops moving a pose by more than this share of the distance flown: weak odometry
+# (measured: the default flight's loops move the trajectory by 0.23 % of the distance, Autzen's at 250 m by 5.7 %,
+# leaving it 2 m off the truth between the loops)
 WEAK_CONSTRAINT = 0.005  # below this ICP cannot tell a slide along the ground (default flight: never below 0.046)
 
 
@@ -72,6 +78,9 @@ def assess(result) -> Health:
     poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
     weak = result.indices[1:][odometry.constraint < WEAK_CONSTRAINT]
     revisits, unclosed = _revisits(result)
+    odometry_xyz, optimised_xyz = odometry.poses[:, :3, 3], result.graph.poses[:, :3, 3]
+    flown = float(np.linalg.norm(np.diff(odometry_xyz, axis=0), axis=1).sum())
+    correction = float(np.linalg.norm(optimised_xyz - odometry_xyz, axis=1).max()) if len(odometry_xyz) else 0.0
     norms = result.graph.loop_whitened_norm
     against = [loop for loop, norm in zip(result.loops, norms, strict=True) if norm > FALSE_LOOP_SIGMAS]
     counts = {
@@ -89,6 +98,8 @@ def assess(result) -> Health:
         "n_edges_back_left_out": result.edges_back_tried - len(result.extra_edges),
         "n_revisits": revisits,
         "n_revisits_unclosed": unclosed,
+        "largest_correction_m": round(correction, 3),
+        "distance_flown_m": round(flown, 1),
     }
     problems = []
     if steps and len(fallbacks) > MAX_FALLBACK_SHARE * steps:
@@ -134,6 +145,13 @@ def assess(result) -> Health:
             "loop, so the drift stays in the map. Likely cause: a loop candidate must be older than "
             f"[loop_closure] sub_map_thresh = {loops.sub_map_thresh} submaps (about {needed} accepted scans), "
             "or the scans do not match within loop_closure_threshold. Try a smaller sub_map_thresh."
+        )
+    if flown > 0 and correction > MAX_CORRECTION_SHARE * flown:
+        problems.append(
+            f"The loop edges moved the trajectory by up to {correction:.1f} m, {correction / flown:.1%} of the "
+            f"{flown:.0f} m flown: the odometry drifted that much, and between the places where loops closed the "
+            "trajectory and the map keep part of that drift. Likely cause: odometry steps on weak ground (too flat, "
+            "little overlap). Fly higher, or over the same ground more than once, so that loops close in more places."
         )
     return Health(counts, problems)
 
