@@ -20,7 +20,7 @@ def check_grid_step(step, scan, target: int = 3000, tolerance: float = 0.05) -> 
     direction = "larger" if kept > target else "smaller"
     return report(
         ok,
-        f"a {float(step):g} m grid leaves the scan within {tolerance:.0%} of {target} points",
+        f"your grid step leaves the scan within {tolerance:.0%} of {target} points",
         f"a {float(step):g} m grid leaves {kept} points, not within {tolerance:.0%} of {target}: "
         f"try a {direction} step",
     )
