@@ -14,6 +14,13 @@ from . import report, unanswered
 SUCCESS_M = 3.0  # a robust fit within this many metres of the truth leaves ICP an easy job (notebook 3)
 
 
+def _verdict(ok: bool, correct: str, hint: str) -> None:
+    """Print the check's one line (:func:`helpers.exercises.report`) and return
+    nothing: a value would show as a second output line in the notebook (a
+    trailing ``;`` does not hide it under nbval)."""
+    report(ok, correct, hint)
+
+
 def _rotations(count: int, seed: int = 0) -> np.ndarray:
     """(count, 4, 4) transforms with random axes, angles spread over [0, 180] deg, and random shifts."""
     rng = np.random.default_rng(seed)
@@ -28,24 +35,24 @@ def _rotations(count: int, seed: int = 0) -> np.ndarray:
     return out
 
 
-def check_rotation_angle(angle_deg, count: int = 20, tolerance: float = 1e-4) -> bool:
+def check_rotation_angle(angle_deg, count: int = 20, tolerance: float = 1e-4) -> None:
     """Exercise 3.1: ``angle_deg(T)`` returns the rotation angle of a 4 x 4 transform in degrees."""
     if unanswered(angle_deg):
-        return report(False, "", "define `angle_deg(T)`, then run this cell again")
+        return _verdict(False, "", "define `angle_deg(T)`, then run this cell again")
     transforms = _rotations(count)
     truth = rotation_angle_deg(transforms)
     try:
         answers = np.array([float(angle_deg(T)) for T in transforms])
     except Exception as exc:  # a learner's function may raise anything
-        return report(False, "", f"angle_deg raised {type(exc).__name__}: {exc}")
+        return _verdict(False, "", f"angle_deg raised {type(exc).__name__}: {exc}")
     wrong = np.flatnonzero(~(np.abs(answers - truth) <= tolerance))
     if len(wrong):
         i = wrong[0]
         hint = f"for a rotation of {truth[i]:.4f} deg angle_deg gives {answers[i]:.4f}"
         if np.any(np.isnan(answers)):
             hint += " (a NaN: keep the cosine within [-1, 1] with np.clip)"
-        return report(False, "", hint)
-    return report(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
+        return _verdict(False, "", hint)
+    return _verdict(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
 
 
 def trials_for(w: float, confidence: float) -> int:
@@ -55,17 +62,17 @@ def trials_for(w: float, confidence: float) -> int:
 
 def check_trials(
     n_trials, moving, fixed, T_true, max_distance: float, confidence: float = 0.999, seeds: int = 10
-) -> bool:
+) -> None:
     """Exercise 3.2: the trials the formula asks for, for the share of matches
     (``moving[i]`` to ``fixed[i]``) that ``T_true`` carries within
     ``max_distance``, and whether MSAC capped there finds the motion."""
     if unanswered(n_trials):
-        return report(False, "", "set `n_trials` from the formula, then run this cell again")
+        return _verdict(False, "", "set `n_trials` from the formula, then run this cell again")
     residual = np.linalg.norm(moving @ T_true[:3, :3].T + T_true[:3, 3] - fixed, axis=1)
     w = float(np.mean(residual < max_distance))
     expected = trials_for(w, confidence)
     if abs(int(n_trials) - expected) > max(1, 0.01 * expected):
-        return report(False, "", f"with w = {w:.3f} and p = {confidence} the formula gives another number: check w^3")
+        return _verdict(False, "", f"with w = {w:.3f} and p = {confidence} the formula gives another number: check w^3")
     hits = 0
     for seed in range(seeds):
         try:
@@ -74,7 +81,7 @@ def check_trials(
         except SlamError:
             pass
     ok = hits >= seeds - 1
-    return report(
+    return _verdict(
         ok,
         f"the formula's trials; capped there, MSAC lands within {SUCCESS_M:g} m "
         f"on at least {seeds - 1} of {seeds} seeds",

@@ -15,18 +15,28 @@ MATCH_COLORS = {"inlier": "#6a3d9a", "outlier": "#b0b0b0"}  # purple: kept by th
 CORRECT_COLORS = {"correct": "#6a3d9a", "wrong": "#d0d0d0"}  # the same idea, judged by the ground truth
 NEIGHBOUR_COLORS = ("#fdd49e", "#fc8d59", "#b30000")  # the largest neighbourhood lightest
 
+# Values the reference fixes inside its code instead of exposing them as parameters.
+REFERENCE_FIXED = {
+    ("loop_closure", "max_attempts"): "helperEstimateLoopCandidates",
+    ("loop_closure", "max_returned"): "helperEstimateLoopCandidates",
+    ("loop_closure", "icp_max_iterations"): "helperEstimateLoopCandidates",
+}
+
 # The notebook that explains each stage's table.
 NOTEBOOKS = {"features": 3, "registration": 3, "map": 4, "loop_closure": 5, "pose_graph": 6}
 
 
 def parameter_origin(table: str, name: str, reference: str | None) -> str:
-    """Where a default comes from, in words: the reference's value, our change
-    of it (with the reference's value), or ours alone."""
+    """Where a default comes from, in words: the reference's value (a
+    parameter of its, or a value fixed in its code), our change of it (with
+    the reference's value), or ours alone."""
     changed = REFERENCE_WORKFLOW.get(table, {})
     if name in changed:
         return f"ours; the reference: {_value(changed[name])}"
     if reference:
         return f"reference (`{reference}`)"
+    if (table, name) in REFERENCE_FIXED:
+        return f"reference, fixed in `{REFERENCE_FIXED[table, name]}`"
     return "ours (not in the reference)"
 
 
