@@ -1,30 +1,43 @@
 """The figures of notebooks 2 (parameters) and 3 (registration), under one name."""
 
 from .parameter_figures import (
-    grid_step_figure,
-    matching_figure,
-    neighbors_figure,
+    descriptor_distance_figure,
+    footprints_figure,
+    grid_steps_figure,
+    neighbourhood_figure,
+    parameter_origin,
     parameter_table,
-    skip_frames_figure,
-    trials_figure,
+    trials_formula_figure,
 )
 from .registration_figures import (
     clouds_figure,
+    darboux_figure,
     descriptor_figure,
+    icp_convergence_figure,
     matches_figure,
+    matching_figure,
+    neighbors_figure,
     profile_figure,
+    skip_frames_figure,
     step_errors_figure,
     surface_error_figure,
     trajectory_figure,
+    trials_figure,
 )
 
 __all__ = [
     "clouds_figure",
+    "darboux_figure",
+    "descriptor_distance_figure",
     "descriptor_figure",
-    "grid_step_figure",
+    "footprints_figure",
+    "grid_steps_figure",
+    "icp_convergence_figure",
     "matches_figure",
     "matching_figure",
     "neighbors_figure",
+    "neighbourhood_figure",
+    "parameter_origin",
     "parameter_table",
     "profile_figure",
     "skip_frames_figure",
@@ -32,4 +45,5 @@ __all__ = [
     "surface_error_figure",
     "trajectory_figure",
     "trials_figure",
+    "trials_formula_figure",
 ]

@@ -1,13 +1,16 @@
-"""Figures for notebook 3: one pair of scans, step by step, then the odometry."""
+"""Figures for notebook 3: one pair of scans, step by step, each step's parameter sweep right after
+it, then the odometry."""
 
 from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
+from matplotlib.colors import LogNorm
+from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from ..geometry import transform_points
-from .parameter_figures import MATCH_COLORS, _grid
+from .parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
 from .style import COLORS, xy_of
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
@@ -123,22 +126,89 @@ def profile_figure(moving, fixed, stages: dict, y: float, half_width: float = 0.
     return fig
 
 
-def surface_error_figure(moving, errors: dict, limit: float = 2.0):
+def surface_error_figure(moving, errors: dict, low: float = 0.01, high: float = 3.0):
     """The moving cloud from above, once per stage, each point coloured by its
     distance to the true surface once moved by that stage's transform.
 
-    ``errors`` maps a title to the (N,) distances in metres."""
+    ``errors`` maps a title to the (N,) distances in metres. The colour scale
+    is logarithmic from ``low`` to ``high`` metres, on a map with no white
+    end, so that a centimetre and a metre both show."""
     n = len(errors)
     fig, axes = plt.subplots(n, 1, figsize=(10, 2.3 * n + 0.6), sharex=True, constrained_layout=True)
     axes = np.atleast_1d(axes)
+    norm = LogNorm(low, high, clip=True)
     for ax, (title, distance) in zip(axes, errors.items(), strict=True):
         order = np.argsort(distance)  # the worst points on top
-        art = _top_view(ax, moving[order], scalars=distance[order], size=3, cmap="magma_r", vmin=0, vmax=limit)
+        art = _top_view(ax, moving[order], scalars=np.maximum(distance[order], low), size=3, cmap="viridis", norm=norm)
         ax.set_title(f"{title}: median {np.median(distance) * 100:.0f} cm", loc="left")
         ax.set(ylabel="x (m)", aspect="equal")
     axes[-1].set_xlabel("y, to the left of the drone (m)")
     axes[-1].invert_xaxis()
-    fig.colorbar(art, ax=axes, label="distance to the true surface (m)", shrink=0.8, extend="max")
+    bar = fig.colorbar(art, ax=axes, label="distance to the true surface (m)", shrink=0.8, extend="both")
+    bar.set_ticks([0.01, 0.03, 0.1, 0.3, 1.0, 3.0], labels=["0.01", "0.03", "0.1", "0.3", "1", "3"])
+    return fig
+
+
+def darboux_figure(p, n_p, q, n_q, frame: dict, angles: dict):
+    """The Darboux frame of one pair of points, drawn in 3-D: the two points,
+    their normals, and the frame ``u``, ``v``, ``w`` built at ``p`` (``frame``
+    maps each name to a unit vector); ``angles`` (names to values, radians
+    or cosines as the caller says) go in the title."""
+    fig = plt.figure(figsize=(7.5, 5.6), constrained_layout=True)
+    ax = fig.add_subplot(projection="3d")
+    span = np.linalg.norm(q - p)
+    scale = 0.45 * span
+    ax.plot(*np.column_stack([p, q]), color="#888888", ls="--", lw=1.2)
+    ax.scatter(*p, color=COLORS["moving"], s=60)
+    ax.scatter(*q, color=COLORS["fixed"], s=60)
+    ax.text(*p, "  p", fontsize=12)
+    ax.text(*q, "  q", fontsize=12)
+    ax.quiver(*q, *(scale * n_q), color=COLORS["fixed"], lw=2.5, arrow_length_ratio=0.15)
+    ax.text(*(q + 1.08 * scale * n_q), r"$n_q$", color=COLORS["fixed"], fontsize=12)
+    for (name, vector), color in zip(frame.items(), ("#d62728", "#2ca02c", "#1f77b4"), strict=True):
+        ax.quiver(*p, *(scale * vector), color=color, lw=2.5, arrow_length_ratio=0.15)
+        ax.text(*(p + 1.1 * scale * vector), f"${name}$", color=color, fontsize=13, fontweight="bold")
+    every = np.vstack([p, q, p + scale * np.vstack(list(frame.values())), q + scale * n_q])
+    centre, half = every.mean(axis=0), 0.6 * np.ptp(every, axis=0).max()
+    ax.set(
+        xlim=(centre[0] - half, centre[0] + half),
+        ylim=(centre[1] - half, centre[1] + half),
+        zlim=(centre[2] - half, centre[2] + half),
+        xlabel="x (m)",
+        ylabel="y (m)",
+        zlabel="z (m)",
+    )
+    ax.set_box_aspect((1, 1, 1))
+    ax.view_init(elev=22, azim=-60)
+    ax.set_title(",  ".join(f"{name} = {value:.2f}" for name, value in angles.items()), fontsize=11)
+    return fig
+
+
+def icp_convergence_figure(runs: dict):
+    """ICP iteration by iteration: for each run (a title mapped to a dict of
+    per-iteration arrays ``pose_cm``, ``surface_cm`` and ``rmse_m``, iteration
+    0 being the start), the pose error against the truth, the median distance
+    of the moved points to the true surface, and ICP's own RMSE."""
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
+    panels = (
+        ("pose_cm", "pose error vs the truth (cm)", "error of the motion", True),
+        ("surface_cm", "median distance to the surface (cm)", "moved points vs the true ground", True),
+        ("rmse_m", "ICP RMSE (m)", "what ICP itself sees", False),
+    )
+    for (title, run), color in zip(runs.items(), ("#1f77b4", "#d62728", "#2ca02c"), strict=False):
+        for ax, (key, label, heading, log) in zip(axes, panels, strict=True):
+            values = np.asarray(run[key], float)
+            ax.plot(np.arange(len(values)), values, "o-", color=color, ms=4, lw=1.6, label=title)
+            ax.set(xlabel="ICP iteration", ylabel=label, title=heading)
+            if log:
+                ax.set_yscale("log")
+                ax.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                ax.yaxis.set_major_formatter(FormatStrFormatter("%g"))
+                ax.yaxis.set_minor_formatter(NullFormatter())
+    for ax in axes:
+        _grid(ax)
+    axes[2].set_ylim(0, None)
+    axes[0].legend(fontsize=9)
     return fig
 
 
@@ -202,3 +272,116 @@ def _shade(ax, x, mask):
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
     for start, stop in zip(edges[::2], edges[1::2], strict=True):
         ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)
+
+
+# The parameter sweeps, each shown right after the step it tunes.
+
+
+def _stacked_matches(ax, x, correct, total, width, xlabel, default, log=False):
+    correct, total = np.asarray(correct), np.asarray(total)
+    ax.bar(x, correct, width, color=CORRECT_COLORS["correct"], label="correct")
+    ax.bar(x, total - correct, width, bottom=correct, color=CORRECT_COLORS["wrong"], label="wrong")
+    ax.set(xlabel=xlabel, ylabel="matches", ylim=(0, 1.3 * total.max()))  # room for the legend
+    share = ax.twinx()
+    share.plot(x, 100 * correct / np.maximum(total, 1), "o-", color="black", lw=1.6, label="share correct")
+    share.set(ylabel="share correct (%)", ylim=(0, 1.3 * 100 * (correct / np.maximum(total, 1)).max()))
+    if log:
+        ax.set_xscale("log")
+    _grid(ax)
+    share.spines["top"].set_visible(False)
+    _mark_default(ax, default)
+    return share
+
+
+def neighbors_figure(neighbors, n_correct, n_matches, default: int = 60):
+    """Matches (correct ones in colour) and the share correct against the FPFH neighbourhood size."""
+    fig, ax = plt.subplots(figsize=(7.5, 3.8), constrained_layout=True)
+    widths = 0.25 * np.asarray(neighbors, float)
+    share = _stacked_matches(ax, neighbors, n_correct, n_matches, widths, "neighbours (k)", default, log=True)
+    ax.set_xticks(neighbors, [str(k) for k in neighbors])
+    ax.minorticks_off()
+    _legend(ax, share)
+    ax.set_title("more neighbours, more telling descriptors")
+    return fig
+
+
+def matching_figure(thresholds, th_correct, th_total, ratios, ra_correct, ra_total, defaults=(0.1, 0.97)):
+    """Matches and share correct against the match threshold (left) and the ratio (right)."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    x_th, x_ra = np.arange(len(thresholds)), np.arange(len(ratios))
+    s1 = _stacked_matches(left, x_th, th_correct, th_total, 0.6, "match threshold", list(thresholds).index(defaults[0]))
+    s2 = _stacked_matches(right, x_ra, ra_correct, ra_total, 0.6, "match ratio", list(ratios).index(defaults[1]))
+    left.set_xticks(x_th, [f"{v:g}" for v in thresholds])
+    right.set_xticks(x_ra, [f"{v:g}" for v in ratios])
+    left.set_title(f"match_threshold (ratio {defaults[1]:g})")
+    right.set_title(f"match_ratio (threshold {defaults[0]:g})")
+    top = max(s1.get_ylim()[1], s2.get_ylim()[1])
+    s1.set_ylim(0, top)
+    s2.set_ylim(0, top)
+    bottom = max(left.get_ylim()[1], right.get_ylim()[1])
+    left.set_ylim(0, bottom)
+    right.set_ylim(0, bottom)
+    _legend(left, s1)
+    return fig
+
+
+def _legend(ax, twin):
+    handles, labels = ax.get_legend_handles_labels()
+    h2, l2 = twin.get_legend_handles_labels()
+    ax.legend(handles + h2, labels + l2, loc="upper left", fontsize=9, framealpha=0.9)
+
+
+def skip_frames_figure(gaps, overlap, n_inliers, error_cm, failed, default: int = 3):
+    """Overlap, MSAC inliers and final translation error against the gap between two scans."""
+    gaps, failed = np.asarray(gaps), np.asarray(failed, bool)
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
+    axes[0].plot(gaps, 100 * np.asarray(overlap), "o-", color=COLORS["fixed"], lw=2)
+    axes[0].set(ylabel="overlap (%)", title="shared ground", ylim=(0, 100))
+    axes[1].plot(gaps, n_inliers, "o-", color=MATCH_COLORS["inlier"], lw=2)
+    axes[1].set(ylabel="MSAC inliers", title="matches the robust fit keeps", ylim=(0, None))
+    error = np.asarray(error_cm, float)
+    axes[2].plot(gaps, error, "-", color=COLORS["odometry"], lw=1.5)
+    axes[2].plot(gaps[~failed], error[~failed], "o", color=COLORS["odometry"], label="registered")
+    axes[2].plot(gaps[failed], error[failed], "X", color="black", ms=10, label="fallback: ICP from a guess")
+    axes[2].set(ylabel="translation error (cm)", title="error after ICP", yscale="log")
+    axes[2].yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    axes[2].yaxis.set_major_formatter(FormatStrFormatter("%g"))
+    axes[2].yaxis.set_minor_formatter(NullFormatter())
+    axes[2].legend(fontsize=9, loc="upper left")
+    for ax in axes:
+        ax.set_xlabel("skip_frames (scans between the two)")
+        ax.set_xticks(gaps)
+        _grid(ax)
+        _mark_default(ax, default)
+    return fig
+
+
+def trials_figure(trials, probability, success, w: float, default: int = 3000):
+    """The chance that MSAC draws at least one all-inlier sample (formula) and
+    the measured share of seeds whose coarse fit lands close to the truth."""
+    trials = np.asarray(trials)
+    fig, ax = plt.subplots(figsize=(7.5, 3.8), constrained_layout=True)
+    n = np.geomspace(trials.min(), trials.max() * 1.5, 200)
+    ax.plot(n, 100 * (1 - (1 - w**3) ** n), color="black", lw=1.5, label=f"$1-(1-w^3)^N$, $w$ = {w:.2f}")
+    ax.plot(trials, 100 * np.asarray(probability), "o", color="black")
+    ax.plot(
+        trials,
+        100 * np.asarray(success),
+        "s--",
+        color=COLORS["optimized"],
+        lw=1.5,
+        label="measured: coarse fit within 3 m, over seeds",
+    )
+    ax.set(
+        xscale="log",
+        xlabel="max_num_trials (N)",
+        ylabel="probability (%)",
+        ylim=(0, 105),
+        title="how many hypotheses are enough",
+    )
+    ax.set_xticks(trials, [str(t) for t in trials])
+    ax.minorticks_off()
+    _grid(ax)
+    _mark_default(ax, default, top=False)
+    ax.legend(fontsize=9, loc="upper left")
+    return fig
