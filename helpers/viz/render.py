@@ -19,9 +19,7 @@ import numpy as np
 
 from ..scene import CLASS_NAMES
 from .display import interactive_views, use_offscreen_vtk
-from .style import CLASS_COLORS, COLORS, ERROR_CMAP, HEIGHT_CMAP, WINDOW
-
-__all__ = ["COLORS", "ERROR_CMAP", "HEIGHT_CMAP", "WINDOW"]  # re-exported: notebooks write render.COLORS[...]
+from .style import CLASS_COLORS, COLORS, ERROR_CMAP, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
 
 # Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
 # blank offline; these characters need no font download.
