@@ -58,3 +58,22 @@ def test_the_scan_player_loads_no_icon_font():
     assert "font-awesome" not in html and 'class="fa ' not in html
     for title, icon in (("Play", "\u25b6"), ("Pause", "\u2016"), ("Next frame", "\u25b7")):
         assert icon in html, f"the {title} button has no icon"
+
+
+def test_a_3d_view_has_a_scale_with_round_ticks():
+    assert render._round_ticks(-399.5, 399.5) == (-400.0, 400.0, 5)
+    assert render._round_ticks(3.2, 7.9) == (3.0, 8.0, 6)
+    first, last, n = render._round_ticks(-123.4, 567.8)
+    step = (last - first) / (n - 1)
+    assert first <= -123.4 and last >= 567.8 and n <= 7 and step in (100.0, 200.0, 500.0)
+    points = np.random.default_rng(0).random((400, 3)) * [100, 80, 10]
+    plain, scaled = (render.cloud_view(points, (300, 200), axes=axes) for axes in (False, True))
+    assert plain.shape == scaled.shape and not np.array_equal(plain, scaled)
+
+
+def test_no_colour_map_of_the_pictures_ends_near_white():
+    import matplotlib
+
+    for name in (render.HEIGHT_CMAP, render.ERROR_CMAP):
+        top = np.asarray(matplotlib.colormaps[name](1.0)[:3])
+        assert top.min() < 0.5, f"{name} ends near white: {top}"

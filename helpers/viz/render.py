@@ -19,7 +19,7 @@ import numpy as np
 
 from ..scene import CLASS_NAMES
 from .display import interactive_views, use_offscreen_vtk
-from .style import CLASS_COLORS, COLORS, HEIGHT_CMAP, WINDOW
+from .style import CLASS_COLORS, COLORS, ERROR_CMAP, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
 
 # Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
 # blank offline; these characters need no font download.
@@ -125,6 +125,7 @@ def draw_cloud(
     zoom: float = 1.3,
     scalar_title: str = "height (m)",
     extra=(),
+    axes: bool = True,
 ):
     """Add points (coloured by ``scalars``, by default their height) and an
     optional path to a PyVista ``plotter``, and place its camera ``elevation``
@@ -132,7 +133,9 @@ def draw_cloud(
 
     ``extra`` is a sequence of ``(points, color)`` drawn as flat-coloured
     clouds. ``path_height`` draws the path at that height instead of its own
-    (a drone at 700 m would sit far above a map at 100 m).
+    (a drone at 700 m would sit far above a map at 100 m). ``axes`` draws
+    the scale (x and y axes in metres along the edges of the cloud's box) and
+    a small x-y-z triad in the corner that shows which way the view looks.
     """
     pv = pyvista()
 
@@ -145,7 +148,7 @@ def draw_cloud(
         clim=clim,
         point_size=point_size,
         render_points_as_spheres=False,
-        scalar_bar_args={"title": scalar_title, "color": "black", "vertical": True},
+        scalar_bar_args={"title": scalar_title, "color": "black", "vertical": True, "fmt": "%.3g"},
     )
     for extra_points, color in extra:
         plotter.add_mesh(pv.PolyData(np.asarray(extra_points, np.float32)), color=color, point_size=point_size)
@@ -157,8 +160,49 @@ def draw_cloud(
         plotter.add_mesh(pv.PolyData(np.asarray(path[:1], np.float32)), color=path_color, point_size=12)
     if title:
         plotter.add_text(title, font_size=11, color="black")
-    _place_camera(plotter, points, elevation, azimuth, zoom)
+    framed = points
+    if axes:
+        box = add_scale(plotter, points)
+        framed = np.vstack([points[:, :3].min(axis=0), points[:, :3].max(axis=0), box])
+        zoom = zoom / 1.08  # room for the tick labels
+    _place_camera(plotter, framed, elevation, azimuth, zoom)
     return plotter
+
+
+def add_scale(plotter, points: np.ndarray, font_size: int = 10) -> np.ndarray:
+    """Axes with round ticks in metres along the x and y edges of a box just
+    around the points (the heights are read from the colour bar), and a small
+    x-y-z triad in the lower-left corner; returns the box's two corners (2, 3)."""
+    lo, hi = np.min(points, axis=0), np.max(points, axis=0)
+    (x0, x1, nx), (y0, y1, ny) = (_round_ticks(lo[k], hi[k]) for k in (0, 1))
+    plotter.show_bounds(
+        bounds=(x0, x1, y0, y1, lo[2], lo[2]),
+        show_zaxis=False,
+        show_zlabels=False,
+        location="front",
+        ticks="outside",
+        xtitle="x (m)",
+        ytitle="y (m)",
+        n_xlabels=nx,
+        n_ylabels=ny,
+        fmt="%.0f",
+        color="black",
+        font_size=font_size,
+        use_3d_text=False,
+    )
+    plotter.add_axes(color="black", line_width=2, viewport=(0.0, 0.0, 0.12, 0.18))
+    return np.array([[x0, y0, lo[2]], [x1, y1, lo[2]]])
+
+
+def _round_ticks(lo: float, hi: float, most: int = 7) -> tuple[float, float, int]:
+    """A range just around ``lo..hi`` whose ends are multiples of a round step
+    (1, 2 or 5 times a power of ten) and its number of ticks, at most ``most``."""
+    span = max(hi - lo, 1e-9)
+    for step in (m * 10.0**e for e in range(int(np.floor(np.log10(span))) - 1, 12) for m in (1, 2, 5)):
+        first, last = np.floor(lo / step) * step, np.ceil(hi / step) * step
+        if (last - first) / step + 1 <= most:
+            return float(first), float(last), round((last - first) / step) + 1
+    return float(lo), float(hi), 2
 
 
 def _place_camera(plotter, points, elevation, azimuth, zoom):

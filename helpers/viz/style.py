@@ -1,5 +1,10 @@
 """The look shared by every picture: one colour per thing in all seven
-notebooks, the height colour map, the size of a 3-D view, the grid."""
+notebooks, the height and error colour maps, the size of a 3-D view, the grid.
+
+Both colour maps are perceptually uniform and end in a saturated colour, not
+near white: on the white background of the 3-D views a near-white top made
+the tallest roofs (or the largest errors) look like holes in the map.
+"""
 
 from __future__ import annotations
 
@@ -14,9 +19,11 @@ COLORS = {
     "waypoints": "#e41a1c",
     "moving": "#e377c2",  # the scan being registered
     "fixed": "#17becf",  # the scan it is registered to
+    "reference": "#9467bd",  # purple: the reference workflow's run, beside ours (notebook 7)
 }
 CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
-HEIGHT_CMAP = "gist_earth"
+HEIGHT_CMAP = "viridis"  # heights: dark violet (low) to yellow (high)
+ERROR_CMAP = "plasma"  # errors and distances: dark blue (small) to yellow (large)
 WINDOW = (900, 600)  # pixels of a 3-D view
 GREY = "#9a9a9a"  # what is there but not the point (too recent submaps, ...)
 LIGHT = "#d9d9d9"
