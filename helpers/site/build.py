@@ -41,12 +41,12 @@ MARKER = ".helpers-site"  # the file that marks a folder as a site this tool wro
 # here gets the first sentence of its introduction).
 SUMMARIES = {
     "01": "the map, the flight and the lidar's fan of rays; scans as the drone records them, played back",
-    "02": "every parameter of the pipeline, with a small picture of what each one controls",
-    "03": "one pair of scans through downsampling, FPFH, matching, MSAC and ICP, then odometry and its drift",
-    "04": "consecutive scans merged into submaps, the places a loop query searches",
-    "05": "recognising a place seen before and measuring the loop edge that ties the two visits",
-    "06": "the pose graph built factor by factor in GTSAM, optimised, and kept safe from a wrong loop edge",
-    "07": "the rebuilt map scored against the truth, and what the loop closures bought",
+    "02": "every parameter of the pipeline, and what changing it does",
+    "03": "one pair of scans through downsampling, FPFH, matching, MSAC and ICP; then odometry and its drift",
+    "04": "consecutive scans merged into submaps, and why they make loop queries cheap",
+    "05": "recognising a place seen before, and measuring the loop edge that ties the two visits",
+    "06": "the GTSAM pose graph before and after optimisation, and a robust kernel against a wrong loop edge",
+    "07": "the rebuilt map scored against the truth, and what loop closure and the pose graph bought",
 }
 
 # Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.
