@@ -173,3 +173,6 @@ def test_the_trame_view_appears_in_jupyterlab_and_turns(lab, tmp_path):
             return float(np.mean(np.abs(after - before).max(axis=2) > 30)) > 0.1 and _coloured_share(after) > 0.05
 
         assert _poll(turned, 60, 2), f"the view did not turn when dragged (see {tmp_path / 'after.png'})"
+        local = ("http://127.0.0.1:", "http://localhost:", "ws://127.0.0.1:", "ws://localhost:", "data:", "blob:")
+        leaving = [url for url in browser.requested() if not url.startswith((*local, "about:"))]
+        assert not leaving, f"JupyterLab asked the network for {leaving}"
