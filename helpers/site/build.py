@@ -102,6 +102,7 @@ CONF = {
         "use_edit_page_button": False,
         "launch_buttons": {},
         "navigation_with_keys": True,
+        "navbar_persistent": [],  # the sidebar has the search box; this one would sit alone in a top bar
     },
 }
 
