@@ -30,7 +30,8 @@ from ..viz.display import KERNEL_ENVIRONMENT
 log = logging.getLogger(__name__)
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"  # the checkout's: notebooks are not installed
 SOLUTIONS = "solutions"  # notebooks/solutions/*.ipynb: the book's appendix, and its folder in the book
-RESULT_PICTURE = Path("figures") / "result.png"  # under NOTEBOOKS: the landing page's picture (as the README's)
+FIGURES = "figures"  # notebooks/figures/: copied into the book
+RESULT_PICTURE = Path(FIGURES) / "result.png"  # the landing page's picture (the README's)
 TIMEOUT_S = 1800  # per notebook
 TITLE = "Aerial lidar SLAM, step by step"
 MATHJAX_DIR = "mathjax"  # the book's copy of MathJax 2.7, in its _static folder
@@ -131,10 +132,10 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
             _add_notebook(path, source / path.name, execute)
         for path in solutions:
             _add_notebook(path, source / SOLUTIONS / path.name, execute)
-        picture = NOTEBOOKS / RESULT_PICTURE
-        if picture.is_file():
-            shutil.copyfile(picture, source / picture.name)
-        (source / "index.md").write_text(_index(source, chapters, solutions, picture.is_file()), encoding="utf-8")
+        if (NOTEBOOKS / FIGURES).is_dir():  # pictures the notebooks' text may show, and the landing page's
+            shutil.copytree(NOTEBOOKS / FIGURES, source / FIGURES, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+        picture = (source / RESULT_PICTURE).is_file()
+        (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
         built = _sphinx(source, Path(tmp) / "build" / "html", Path(tmp) / "build" / "doctrees")
@@ -177,7 +178,7 @@ def _index(source: Path, chapters: list[Path], solutions: list[Path], picture: b
     ]
     if picture:
         lines += [
-            f"```{{figure}} {RESULT_PICTURE.name}",
+            f"```{{figure}} {RESULT_PICTURE.as_posix()}",
             ":alt: the default flight: ground truth, odometry only, and the trajectory after loop closure",
             "",
             "Where the book ends: the odometry alone (red) drifts away from the true flight (green); after loop",
