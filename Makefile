@@ -1,5 +1,5 @@
 # Two commands do everything on a fresh Debian machine with Python 3.11:
-#   make run   - the dataset, the whole SLAM run and the executed tutorial as a static site
+#   make run   - the dataset, the whole SLAM run and the executed tutorial as a book (build/html/index.html)
 #   make test  - lint, unit tests and notebook regression tests (nbval)
 # Both create .venv and install what is missing first.
 
@@ -57,17 +57,17 @@ sysdeps:
 	  fi; \
 	fi
 
-# Debian's Chromium, for the test that opens the exported site in a headless
-# browser (tests/test_site.py); that test alone is skipped, with its reason,
+# Debian's Chromium, for the tests that open the book in a headless browser
+# (tests/test_site.py); those tests alone are skipped, with their reason,
 # where Chromium cannot be installed.
 browser:
 	@command -v chromium >/dev/null || { \
 	  if [ "$$(id -u)" = 0 ]; then \
-	    echo "installing Debian's chromium for the browser test of the site"; \
+	    echo "installing Debian's chromium for the browser tests of the book"; \
 	    { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium fonts-dejavu-core >/dev/null; } \
-	      || echo "warning: chromium could not be installed; the browser test of the site will be skipped" >&2; \
+	      || echo "warning: chromium could not be installed; the browser tests of the book will be skipped" >&2; \
 	  else \
-	    echo "note: no chromium (sudo apt-get install chromium); the browser test of the site will be skipped" >&2; \
+	    echo "note: no chromium (sudo apt-get install chromium); the browser tests of the book will be skipped" >&2; \
 	  fi; }
 
 clean:

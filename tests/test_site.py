@@ -1,50 +1,85 @@
-"""The static site, exported from the committed notebooks without running
-them: every page is linked in order, every picture is embedded and shows
-something, the scan player carries its frames with it, nothing comes from
-the network, and a headless browser shows the pictures and the formulas."""
+"""The book, built from the committed notebooks without running them: a
+landing page with the result and a line per page, the whole book in every
+page's sidebar, previous/next links in reading order, a search, every picture
+a local file that shows something, the scan player with its frames, and
+nothing asked of the network. Then a headless Chromium opens every page from
+disk: it renders, its formulas are typeset, its pictures load, it requests
+nothing off the machine, and the search page finds a word of a notebook."""
 
 import base64
 import io
+import json
 import re
-import shutil
-import subprocess
-import tempfile
+import time
 from contextlib import redirect_stderr
 from html.parser import HTMLParser
 from pathlib import Path
+from urllib.parse import unquote, urlsplit
 
 import numpy as np
 import pytest
+from browser import CHROMIUM, Browser
 from PIL import Image
 
 from helpers.__main__ import main
 from helpers.site import build as site_module
-from helpers.site import build_site, notebook_paths
+from helpers.site import build_site, notebook_paths, solution_paths
 
-CHROMIUM = Path("/usr/bin/chromium")
 FRAME = re.compile(r'frames\[\d+\] = "(data:image/[^"]+)"')
 ANIMATION_IMG = "_anim_img"  # id prefix of the <img> a matplotlib animation draws its frames into
+OFF_MACHINE = re.compile(r"^(https?:|wss?:|ftp:)?//", re.IGNORECASE)
+CSS_URL = re.compile(r"url\(\s*['\"]?([^'\")]+)")
 
 
 class _Page(HTMLParser):
-    """Collects the links, the images and the loaded resources of one page."""
+    """Collects one page's links (and where they sit), images and loaded resources."""
 
     def __init__(self):
         super().__init__()
-        self.links: list[str] = []
+        self.links: list[str] = []  # every <a href>
+        self.sidebar: list[str] = []  # <a href> of the book's navigation (the left sidebar)
+        self.previous: list[str] = []
+        self.next: list[str] = []
         self.images: list[dict] = []
-        self.resources: list[str] = []  # what the browser loads: scripts, style sheets
+        self.resources: list[str] = []  # what a browser loads: scripts, style sheets, pictures, frames, fonts
+        self.main: list[str] = []  # <a href> inside the page's article
+        self._nav_depth = 0
+        self._article_depth = 0
 
     def handle_starttag(self, tag, attrs):
         attrs = dict(attrs)
+        classes = (attrs.get("class") or "").split()
+        if tag == "nav":
+            self._nav_depth += self._nav_depth > 0 or "bd-docs-nav" in classes
+        if tag == "article":
+            self._article_depth += 1
         if tag == "a" and "href" in attrs:
-            self.links.append(attrs["href"])
+            href = attrs["href"]
+            self.links.append(href)
+            if self._nav_depth:
+                self.sidebar.append(href)
+            if self._article_depth:
+                self.main.append(href)
+            if "left-prev" in classes:
+                self.previous.append(href)
+            if "right-next" in classes:
+                self.next.append(href)
         elif tag == "img":
             self.images.append(attrs)
-        elif tag == "script" and attrs.get("src"):
+            if attrs.get("src"):
+                self.resources.append(attrs["src"])
+        elif tag in ("script", "iframe", "source", "video", "audio", "embed") and attrs.get("src"):
             self.resources.append(attrs["src"])
         elif tag == "link" and attrs.get("href"):
             self.resources.append(attrs["href"])
+        elif tag == "object" and attrs.get("data"):
+            self.resources.append(attrs["data"])
+
+    def handle_endtag(self, tag):
+        if tag == "nav" and self._nav_depth:
+            self._nav_depth -= 1
+        if tag == "article" and self._article_depth:
+            self._article_depth -= 1
 
 
 def _parse(path: Path) -> _Page:
@@ -53,14 +88,23 @@ def _parse(path: Path) -> _Page:
     return page
 
 
-def _assert_picture(uri: str, where: str):
-    """A data URI that decodes to an image with more than one colour."""
-    assert uri.startswith("data:image/"), f"{where}: image not embedded ({uri[:60]!r})"
+def _local(page: Path, href: str) -> Path | None:
+    """The file a relative link of ``page`` points to (None for an in-page anchor)."""
+    target = unquote(urlsplit(href).path)
+    return (page.parent / target).resolve() if target else None
+
+
+def _assert_picture(image: Image.Image, where: str):
+    pixels = np.asarray(image.convert("RGB"), dtype=float)
+    assert pixels.shape[0] > 10 and pixels.shape[1] > 10, f"{where}: image of {pixels.shape[:2]} pixels"
+    assert pixels.std() > 2.0, f"{where}: image is blank (pixel std {pixels.std():.2f})"
+
+
+def _data_picture(uri: str, where: str):
+    assert uri.startswith("data:image/"), f"{where}: not an embedded image ({uri[:60]!r})"
     header, _, payload = uri.partition(",")
     assert header.endswith(";base64"), f"{where}: image not base64 ({header!r})"
-    image = np.asarray(Image.open(io.BytesIO(base64.b64decode(payload))).convert("RGB"), dtype=float)
-    assert image.shape[0] > 10 and image.shape[1] > 10, f"{where}: image of {image.shape[:2]} pixels"
-    assert image.std() > 2.0, f"{where}: image is blank (pixel std {image.std():.2f})"
+    _assert_picture(Image.open(io.BytesIO(base64.b64decode(payload))), where)
 
 
 def _colourful_share(path: Path) -> float:
@@ -70,119 +114,225 @@ def _colourful_share(path: Path) -> float:
     return float(np.mean(image.max(axis=2) - image.min(axis=2) > 60))
 
 
-def _chromium(page: Path, tmp_path: Path, *args: str) -> subprocess.CompletedProcess:
-    """Headless Chromium on ``page``, with no network and a fresh profile;
-    ``--virtual-time-budget`` lets the page's scripts (MathJax) finish first."""
-    profile = tempfile.mkdtemp(prefix="chromium-profile-", dir=tmp_path)
-    try:
-        return subprocess.run(
-            [
-                str(CHROMIUM),
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                f"--user-data-dir={profile}",
-                "--virtual-time-budget=10000",
-                *args,
-                page.resolve().as_uri(),
-            ],
-            check=True,
-            capture_output=True,
-            text=True,
-            timeout=180,
-        )
-    finally:
-        shutil.rmtree(profile, ignore_errors=True)
-
-
 @pytest.fixture(scope="module")
-def site(tmp_path_factory) -> Path:
-    return build_site(tmp_path_factory.mktemp("site") / "html", execute=False)
+def book(tmp_path_factory) -> Path:
+    """The book from the committed outputs; the checkout's notebooks folder is left as it was."""
+    before = sorted(p.relative_to(site_module.NOTEBOOKS) for p in site_module.NOTEBOOKS.rglob("*"))
+    start = time.perf_counter()
+    index = build_site(tmp_path_factory.mktemp("book") / "html", execute=False)
+    print(f"book built in {time.perf_counter() - start:.1f} s")
+    assert sorted(p.relative_to(site_module.NOTEBOOKS) for p in site_module.NOTEBOOKS.rglob("*")) == before
+    return index
 
 
-def test_index_links_every_notebook_page_in_order(site):
-    expected = [path.with_suffix(".html").name for path in notebook_paths()]
-    assert site.name == "index.html"
-    assert _parse(site).links == expected
-    for page in expected:
-        assert (site.parent / page).is_file(), f"{page} is linked but missing"
+def _pages(book: Path) -> list[Path]:
+    """The book's pages in reading order: the landing page, the notebooks, the solutions."""
+    chapters = [book.parent / p.with_suffix(".html").name for p in notebook_paths()]
+    solutions = [book.parent / site_module.SOLUTIONS / p.with_suffix(".html").name for p in solution_paths()]
+    return [book, *chapters, *solutions]
 
 
-def test_every_image_is_embedded_and_shows_something(site):
-    for page in _parse(site).links:
-        parsed = _parse(site.parent / page)
-        for number, attrs in enumerate(parsed.images):
-            if attrs.get("id", "").startswith(ANIMATION_IMG) and "src" not in attrs:
+def test_the_landing_page_shows_the_result_and_every_page_in_order(book):
+    pages = _pages(book)
+    for page in pages:
+        assert page.is_file(), f"{page.name} is missing"
+    landing = _parse(book)
+    listed = [str(_local(book, href)) for href in landing.main if _local(book, href) not in (None, book.resolve())]
+    assert listed == [str(p.resolve()) for p in pages[1:]], "the landing page lists the pages out of order"
+    pictures = [attrs["src"] for attrs in landing.images if "result" in attrs.get("src", "")]
+    assert pictures, "the landing page has no result picture"
+    _assert_picture(Image.open(book.parent / pictures[0]), "the landing page's picture")
+    text = book.read_text(encoding="utf-8")
+    for path in notebook_paths():  # each page's line says what it teaches
+        assert site_module._summary(path) in text.replace("\u2019", "'"), f"no line about {path.name}"
+
+
+def test_every_page_has_the_whole_book_in_its_sidebar_and_its_neighbours_linked(book):
+    pages = _pages(book)
+    for number, page in enumerate(pages):
+        parsed = _parse(page)
+        sidebar = {_local(page, href) or page.resolve() for href in parsed.sidebar}
+        missing = [p.name for p in pages if p.resolve() not in sidebar]
+        assert not missing, f"{page.name}'s sidebar lacks {missing}"
+        previous = [_local(page, href) for href in parsed.previous]
+        following = [_local(page, href) for href in parsed.next]
+        assert previous == ([pages[number - 1].resolve()] if number else []), f"{page.name}: previous {previous}"
+        last = number == len(pages) - 1
+        assert following == ([] if last else [pages[number + 1].resolve()]), f"{page.name}: next {following}"
+
+
+def test_every_link_between_pages_resolves(book):
+    for page in [*_pages(book), book.parent / "search.html", book.parent / "genindex.html"]:
+        for href in _parse(page).links:
+            if OFF_MACHINE.match(href) or href.startswith(("mailto:", "javascript:")):
+                continue  # a reference the reader may follow; never loaded by the page itself
+            target = _local(page, href)
+            assert target is None or target.is_file(), f"{page.name} links {href}, which the book lacks"
+
+
+def test_every_picture_is_a_local_file_that_shows_something(book):
+    for page in _pages(book):
+        for number, attrs in enumerate(_parse(page).images):
+            where = f"{page.name}, image {number}"
+            source = attrs.get("src", "")
+            if attrs.get("id", "").startswith(ANIMATION_IMG) and not source:
                 continue  # an animation's frames live in its script (checked below)
-            _assert_picture(attrs.get("src", ""), f"{page}, image {number}")
+            if source.startswith("data:"):
+                _data_picture(source, where)
+                continue
+            path = _local(page, source)
+            assert path is not None and path.is_file(), f"{where}: {source} is missing"
+            _assert_picture(Image.open(path), where)
 
 
-def test_the_scan_player_is_embedded_with_its_frames(site):
-    page = site.parent / "01_dataset.html"
+def test_the_scan_player_is_embedded_with_its_frames(book):
+    page = book.parent / "01_dataset.html"
     images = _parse(page).images
     assert any(attrs.get("id", "").startswith(ANIMATION_IMG) for attrs in images), "no animation in 01"
     frames = FRAME.findall(page.read_text(encoding="utf-8"))
     assert len(frames) > 5, f"the scan player has {len(frames)} frames"
     for number, uri in enumerate(frames):
         assert uri.startswith("data:image/jpeg;base64,"), f"frame {number} is not an embedded JPEG"
-        _assert_picture(uri, f"scan player frame {number}")
+        _data_picture(uri, f"scan player frame {number}")
 
 
-def test_pages_load_nothing_from_the_network(site):
-    """Opened from disk with no network, a page must not need a CDN: MathJax
-    is the site's own copy, the scan player's icons are characters."""
-    for page in ["index.html", *_parse(site).links]:
-        for resource in _parse(site.parent / page).resources:
-            assert not re.match(r"(https?:)?//", resource), f"{page} loads {resource} from the network"
-            local = site.parent / resource.split("?")[0]
-            assert local.is_file(), f"{page} loads {resource}, which the site lacks"
+def test_pages_and_style_sheets_load_nothing_from_the_network(book):
+    """A page opened from disk with no network must not need a CDN: MathJax,
+    the theme's fonts and icons are the book's own files."""
+    root = book.parent
+    pages = [*_pages(book), root / "search.html", root / "genindex.html"]
+    for page in pages:
+        for resource in _parse(page).resources:
+            assert not OFF_MACHINE.match(resource), f"{page.name} loads {resource} from the network"
+            local = None if resource.startswith("data:") else _local(page, resource)
+            assert local is None or local.is_file(), f"{page.name} loads {resource}, which the book lacks"
+    for sheet in root.glob("_static/**/*.css"):
+        for url in CSS_URL.findall(sheet.read_text(encoding="utf-8", errors="replace")):
+            assert not OFF_MACHINE.match(url), f"{sheet.relative_to(root)} loads {url} from the network"
+    assert (root / "_static" / "mathjax" / "MathJax.js").is_file()
 
 
-@pytest.fixture()
+def test_the_search_index_holds_the_notebooks_words(book):
+    root = book.parent
+    assert (root / "search.html").is_file()
+    text = (root / "searchindex.js").read_text(encoding="utf-8")
+    index = json.loads(text[text.index("(") + 1 : text.rindex(")")])
+    assert "06_pose_graph" in index["docnames"]
+    assert "gtsam" in index["terms"], "the search index lacks a word of notebook 6"
+
+
+# In a headless browser, from disk: one Chromium for all pages.
+
+
+@pytest.fixture(scope="module")
 def browser():
     if not CHROMIUM.exists():
         pytest.skip(f"no browser at {CHROMIUM}: this check needs Debian's chromium (make test installs it as root)")
+    with Browser() as opened:
+        yield opened
 
 
-def test_pages_render_with_their_pictures_in_a_headless_browser(site, tmp_path, browser):
-    index = tmp_path / "index.png"
-    _chromium(site, tmp_path, f"--screenshot={index}", "--window-size=1000,700")
-    image = np.asarray(Image.open(index).convert("L"), dtype=float)
-    assert image.std() > 2.0, f"the index page looks blank (pixel std {image.std():.2f})"
+# Resolves, with the number of typeset formulas, once MathJax's first typesetting of the page has ended and
+# the fonts it asked for have loaded (the hook returns nothing: MathJax would wait on what it returns).
+MATHJAX_DONE = """new Promise(done => {
+  if (!document.querySelector('.math')) return done(0);
+  const count = () => document.querySelectorAll('script[type^="math/tex"]').length;
+  const wait = () => (window.MathJax && MathJax.Hub && MathJax.Hub.Register)
+    ? MathJax.Hub.Register.StartupHook('End', () => { document.fonts.ready.then(() => done(count())); })
+    : setTimeout(wait, 50);
+  wait();
+})"""
+PAGE_STATE = """(() => {
+  const article = document.querySelector('article');
+  const prose = article ? article.cloneNode(true) : document.createElement('div');
+  prose.querySelectorAll('pre, code, script, style').forEach(e => e.remove());
+  return {
+    title: document.title,
+    text: article ? article.innerText.length : 0,
+    untypeset: [...document.querySelectorAll('.math.nohighlight')]  // Sphinx's; MathJax's own output has .math too
+      .filter(e => !e.querySelector('.MathJax, .MathJax_Display')).map(e => e.textContent.slice(0, 60)),
+    errors: document.querySelectorAll('.MathJax_Error, .merror').length,
+    raw: ['$$', '\\\\(', '\\\\['].filter(d => prose.textContent.includes(d)),
+    broken: [...document.images].filter(i => i.src && !(i.complete && i.naturalWidth > 0)).map(i => i.src),
+    images: document.images.length,
+  };
+})()"""
 
-    stage = tmp_path / "stage.png"  # tall enough for the first three pictures of the page
-    _chromium(site.parent / "07_map_comparison.html", tmp_path, f"--screenshot={stage}", "--window-size=1000,3000")
-    share = _colourful_share(stage)
-    assert share > 0.05, f"the map-comparison page shows {share:.1%} colourful pixels: its pictures did not render"
+
+def test_every_page_renders_offline_with_its_formulas_typeset(book, browser):
+    for page in [*_pages(book), book.parent / "search.html"]:
+        browser.open(page.resolve().as_uri())
+        browser.evaluate(MATHJAX_DONE)
+        state = browser.evaluate(PAGE_STATE)
+        name = page.relative_to(book.parent)
+        assert (state["title"] and state["text"] > 100) or page.name == "search.html", f"{name} shows no text"
+        assert not state["broken"], f"{name}: pictures that did not load: {state['broken']}"
+        assert not state["untypeset"], f"{name}: formulas left as TeX: {state['untypeset']}"
+        assert not state["errors"], f"{name}: {state['errors']} formulas MathJax could not read"
+        assert not state["raw"], f"{name}: untypeset TeX delimiters {state['raw']} in its text"
+        leaving = [url for url in browser.requested() if not url.startswith(("file:", "data:", "about:"))]
+        assert not leaving, f"{name} asked the network for {leaving}"
+        assert not browser.failed(), f"{name} could not load {browser.failed()}"
+        thrown = [e["params"]["exceptionDetails"] for e in browser.events if e["method"] == "Runtime.exceptionThrown"]
+        assert not thrown, f"{name}: script errors {thrown}"
 
 
-def test_the_formulas_are_typeset_offline(site, tmp_path, browser):
-    page = site.parent / "06_pose_graph.html"
-    dom = _chromium(page, tmp_path, "--dump-dom").stdout
-    source = page.read_text(encoding="utf-8")
-    assert "$$" in source, "the pose-graph page has no display formula to typeset"
-    typeset = dom.count('class="MathJax"')  # a typeset formula (HTML-CSS output)
-    assert typeset >= 10, f"MathJax typeset {typeset} formulas on {page.name}"
+def test_the_pose_graph_formulas_are_typeset(book, browser):
+    browser.open((book.parent / "06_pose_graph.html").resolve().as_uri())
+    assert browser.evaluate(MATHJAX_DONE) >= 10, "MathJax typeset fewer than 10 formulas on 06_pose_graph"
 
 
-# The output folder: replaced only when it is empty or an earlier site (checked on a one-page site, not executed).
+def test_the_search_page_finds_a_word_of_a_notebook(book, browser):
+    browser.open((book.parent / "search.html").resolve().as_uri() + "?q=gtsam")
+    found = browser.evaluate("""new Promise(done => {
+      const start = Date.now();
+      const poll = () => {
+        const hits = [...document.querySelectorAll('#search-results li a')].map(a => a.getAttribute('href'));
+        (hits.length || Date.now() - start > 10000) ? done(hits) : setTimeout(poll, 100);
+      };
+      poll();
+    })""")
+    assert any(hit.startswith("06_pose_graph.html") for hit in found), f"searching gtsam found {found}"
+
+
+def test_the_pictures_show_in_the_browser(book, browser, tmp_path):
+    browser.resize(1300, 900)
+    browser.open(book.resolve().as_uri())
+    landing = browser.screenshot(tmp_path / "index.png")
+    image = np.asarray(Image.open(landing).convert("L"), dtype=float)
+    assert image.std() > 2.0, f"the landing page looks blank (pixel std {image.std():.2f})"
+
+    browser.open((book.parent / "07_map_comparison.html").resolve().as_uri())
+    browser.evaluate(MATHJAX_DONE)  # the page's layout settles once its formulas are typeset
+    count = browser.evaluate("document.querySelectorAll('article img').length")
+    assert count >= 3, f"the map-comparison page shows {count} pictures"
+    for number in range(3):
+        box = browser.evaluate(f"""(() => {{
+          const image = document.querySelectorAll('article img')[{number}];
+          image.scrollIntoView({{block: 'center'}});
+          const r = image.getBoundingClientRect();
+          return {{x: r.left + scrollX, y: r.top + scrollY, width: r.width, height: r.height}};
+        }})()""")
+        assert box["width"] > 100 and box["height"] > 100, f"picture {number} of 07 is drawn {box}"
+        painted = browser.screenshot(tmp_path / f"picture{number}.png", box)
+        share = _colourful_share(painted)
+        assert share > 0.05, f"picture {number} of 07 shows {share:.1%} colourful pixels in the browser"
+
+
+# The output folder: replaced only when it is empty or an earlier site (checked on a one-page book, not executed).
 
 
 @pytest.fixture()
 def one_notebook(tmp_path, monkeypatch):
-    """The site's notebooks are one small notebook in a folder of its own."""
+    """The book's notebooks are one small notebook in a folder of its own (no solutions)."""
     import nbformat.v4
 
     folder = tmp_path / "notebooks"
     folder.mkdir()
-    notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# A page\n\nSome text.")])
+    notebook = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# A page\n\nSome text, $x^2$.")])
     nbformat.write(notebook, folder / "01_page.ipynb")
     monkeypatch.setattr(site_module, "NOTEBOOKS", folder)
+    return folder
 
 
 def _site(out) -> tuple[int, str]:
@@ -223,8 +373,47 @@ def test_the_site_fills_an_empty_folder_and_replaces_an_earlier_site(tmp_path, o
     out.mkdir(parents=True)
     assert _site(out)[0] == 0
     assert (out / "01_page.html").is_file() and (out / site_module.MARKER).is_file()
-    assert _parse(out / "index.html").links == ["01_page.html"]
+    assert "01_page.html" in _parse(out / "index.html").main
+    assert "Appendix" not in (out / "index.html").read_text(encoding="utf-8")  # no solutions, no appendix
     (out / "stale.html").write_text("from an older build")
     assert _site(out)[0] == 0
     assert not (out / "stale.html").exists() and (out / "01_page.html").is_file()
-    assert [p.name for p in out.parent.iterdir()] == ["html"]  # no temporary folders left
+    assert [p.name for p in out.parent.iterdir()] == ["html"]  # no temporary folders, nothing of myst-nb's
+
+
+def test_the_solutions_are_the_books_appendix(tmp_path, one_notebook):
+    import nbformat.v4
+
+    (one_notebook / "solutions").mkdir()
+    answer = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# Solutions to page 1\n\nThe answers.")])
+    nbformat.write(answer, one_notebook / "solutions" / "01_page_solutions.ipynb")
+    out = tmp_path / "html"
+    assert _site(out)[0] == 0
+    index = _parse(out / "index.html")
+    assert index.main.index("01_page.html") < index.main.index("solutions/01_page_solutions.html")
+    page = out / "solutions" / "01_page_solutions.html"
+    assert page.is_file()
+    assert [_local(page, href) for href in _parse(page).previous] == [(out / "01_page.html").resolve()]
+    assert "Appendix: solutions" in page.read_text(encoding="utf-8")  # the sidebar's caption
+
+
+def test_a_broken_link_fails_the_build_and_leaves_the_folder_alone(tmp_path, one_notebook):
+    import nbformat.v4
+
+    broken = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# B\n\nSee [it](09_missing.ipynb).")])
+    nbformat.write(broken, one_notebook / "02_broken.ipynb")
+    out = tmp_path / "html"
+    code, err = _site(out)
+    assert code == 2 and "09_missing.ipynb" in err and "02_broken.ipynb" in err
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == ["notebooks"]
+
+
+def test_the_notebooks_run_in_a_kernel_that_draws_3d_views_as_pictures(tmp_path, one_notebook):
+    import nbformat.v4
+
+    cell = nbformat.v4.new_code_cell("import os\nprint('views:', os.environ.get('HELPERS_3D'))")
+    nbformat.write(nbformat.v4.new_notebook(cells=[cell]), one_notebook / "02_run.ipynb")
+    out = tmp_path / "html"
+    assert main(["site", "--out", str(out)]) == 0  # executed, as by make run
+    assert "views: static" in (out / "02_run.html").read_text(encoding="utf-8")
+    assert not nbformat.read(one_notebook / "02_run.ipynb", as_version=4).cells[0].outputs  # the checkout's copy

@@ -1,15 +1,25 @@
-"""The static site: the notebooks executed in order and exported to HTML,
-with an index page linking them. Images and animations are embedded in each
-page and MathJax is copied beside the pages (from the ``jupyter-server-mathjax``
-package), so the site opens from disk with no server and no network."""
+"""The tutorial as a book: the notebooks (executed, or as committed) built by
+Sphinx with myst-nb and sphinx-book-theme, the tooling Jupyter Book is made
+of. A landing page shows the result and says what each page teaches; every
+page has the whole book in its sidebar, previous/next links and a search box.
+MathJax 2.7 (from ``jupyter-server-mathjax``) is copied beside the pages and
+the theme's fonts and icons are its own files, so the book opens from disk
+with no server and no network.
+
+The Sphinx source tree (a generated ``conf.py`` and ``index.md``, copies of
+the notebooks) lives in a temporary folder, so building leaves the checkout
+as it was."""
 
 from __future__ import annotations
 
-import html
 import importlib.util
+import io
 import logging
 import os
+import re
 import shutil
+import tempfile
+import warnings
 from pathlib import Path
 from unittest import mock
 
@@ -19,49 +29,221 @@ from ..viz.display import KERNEL_ENVIRONMENT
 
 log = logging.getLogger(__name__)
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"  # the checkout's: notebooks are not installed
+SOLUTIONS = "solutions"  # notebooks/solutions/*.ipynb: the book's appendix, and its folder in the book
+FIGURES = "figures"  # notebooks/figures/: copied into the book
+RESULT_PICTURE = Path(FIGURES) / "result.png"  # the landing page's picture (the README's)
 TIMEOUT_S = 1800  # per notebook
-TEMPLATE = Path(__file__).parent / "templates" / "offline.html.j2"
-MATHJAX_DIR = "mathjax"  # the site's copy of MathJax 2.7, beside the pages
+TITLE = "Aerial lidar SLAM, step by step"
+MATHJAX_DIR = "mathjax"  # the book's copy of MathJax 2.7, in its _static folder
 MATHJAX_URL = f"{MATHJAX_DIR}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"  # the one full config it ships
 MARKER = ".helpers-site"  # the file that marks a folder as a site this tool wrote (and may replace)
 
+# What each page teaches, one line on the landing page (by the notebook's number; a notebook not listed
+# here gets the first sentence of its introduction).
+SUMMARIES = {
+    "01": "the map, the flight and the lidar's fan of rays; scans as the drone records them, played back",
+    "02": "every parameter of the pipeline, and what changing it does",
+    "03": "one pair of scans through downsampling, FPFH, matching, MSAC and ICP; then odometry and its drift",
+    "04": "consecutive scans merged into submaps, and why they make loop queries cheap",
+    "05": "recognising a place seen before, and measuring the loop edge that ties the two visits",
+    "06": "the GTSAM pose graph before and after optimisation, and a robust kernel against a wrong loop edge",
+    "07": "the rebuilt map scored against the truth, and what loop closure and the pose graph bought",
+}
+
+# Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.
+FATAL_WARNINGS = re.compile(
+    r"toctree contains reference to nonexisting document|image file not readable|undefined label|"
+    r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]"
+)
+
+ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
+
+# The generated conf.py: everything Sphinx is told.
+CONF = {
+    "project": TITLE,
+    "author": "the aerial-lidar-slam authors",
+    "extensions": ["myst_nb"],
+    "exclude_patterns": ["_build", "**.ipynb_checkpoints"],
+    "myst_enable_extensions": ["dollarmath", "amsmath"],
+    "myst_heading_anchors": 3,  # [text](#a-heading) links within a notebook
+    "myst_update_mathjax": False,  # it writes a MathJax 3/4 configuration; ours is MathJax 2 (below)
+    "nb_execution_mode": "off",  # build_site executes the notebooks itself, in the kernel environment
+    "nb_merge_streams": True,
+    "nb_ipywidgets_js": {},  # no widget in our outputs; its default loads require.js from a CDN
+    "mathjax_path": MATHJAX_URL,  # under _static
+    "mathjax2_config": {
+        "tex2jax": {
+            "inlineMath": [["\\(", "\\)"]],
+            "displayMath": [["\\[", "\\]"]],
+            "processEscapes": True,
+            "processClass": "math|output_area",
+            "ignoreClass": "tex2jax_ignore|mathjax_ignore|document",
+        },
+        # The copy has only the STIX web fonts (jupyter-server-mathjax's): MathJax's default TeX ones are absent.
+        "HTML-CSS": {"availableFonts": [], "preferredFont": None, "webFont": "STIX-Web", "imageFont": None},
+        "showMathMenu": False,
+        "messageStyle": "none",
+        "fast-preview": {"disabled": True},  # its quick first pass would ask for the TeX fonts too
+        # The hidden MathML kept for screen readers asks for TeX fonts by mathvariant (script, double-struck):
+        # it keeps the fonts around it instead.
+        "styles": {".MJX_Assistive_MathML [mathvariant]": {"font-family": "inherit"}},
+    },
+    "html_theme": "sphinx_book_theme",
+    "html_title": TITLE,
+    "html_static_path": [],
+    "html_show_sphinx": False,
+    "html_theme_options": {
+        "home_page_in_toc": True,
+        "show_navbar_depth": 1,
+        "show_toc_level": 2,
+        "use_download_button": True,  # the page's notebook, from _sources
+        "use_fullscreen_button": False,
+        "use_repository_button": False,
+        "use_issues_button": False,
+        "use_edit_page_button": False,
+        "launch_buttons": {},
+        "navigation_with_keys": True,
+        "navbar_persistent": [],  # the sidebar has the search box; this one would sit alone in a top bar
+    },
+}
+
 
 def notebook_paths() -> list[Path]:
+    """The tutorial's notebooks, in order."""
     found = sorted(NOTEBOOKS.glob("[0-9][0-9]_*.ipynb"))
     if not found:
         raise SlamError(f"no notebooks found in {NOTEBOOKS}")
     return found
 
 
-def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
-    """Execute (optionally) and export every notebook; returns index.html."""
-    import nbformat
-    from nbclient import NotebookClient
-    from nbconvert import HTMLExporter
+def solution_paths() -> list[Path]:
+    """The worked answers to the exercises (possibly none), in order."""
+    return sorted((NOTEBOOKS / SOLUTIONS).glob("*.ipynb"))
 
-    exporter = HTMLExporter(
-        template_name="lab",
-        template_file=str(TEMPLATE),
-        mathjax_url=MATHJAX_URL,
-    )
-    pages = []
-    with paths.atomic_dir(out_dir, MARKER) as work:
-        for path in notebook_paths():
-            notebook = nbformat.read(path, as_version=4)
-            if execute:
-                log.info("executing %s", path.name)
-                # Its kernel draws 3-D views as pictures: a page on disk has no kernel to talk to.
-                with mock.patch.dict(os.environ, KERNEL_ENVIRONMENT):
-                    where = {"metadata": {"path": str(NOTEBOOKS)}}
-                    NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
-            body, _ = exporter.from_notebook_node(notebook)
-            page = path.with_suffix(".html").name
-            (work / page).write_text(body, encoding="utf-8")
-            pages.append((page, _title(notebook, path)))
-        (work / "index.html").write_text(_index(pages), encoding="utf-8")
-        _copy_mathjax(work / MATHJAX_DIR)
+
+def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
+    """Execute (optionally) the notebooks and build the book; returns its index.html."""
+    chapters, solutions = notebook_paths(), solution_paths()
+    with paths.atomic_dir(out_dir, MARKER) as work, tempfile.TemporaryDirectory(prefix="helpers-book-") as tmp:
+        source = Path(tmp) / "source"
+        source.mkdir()
+        (source / SOLUTIONS).mkdir()
+        for path in chapters:
+            _add_notebook(path, source / path.name, execute)
+        for path in solutions:
+            _add_notebook(path, source / SOLUTIONS / path.name, execute)
+        if (NOTEBOOKS / FIGURES).is_dir():  # pictures the notebooks' text may show, and the landing page's
+            shutil.copytree(NOTEBOOKS / FIGURES, source / FIGURES, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
+        picture = (source / RESULT_PICTURE).is_file()
+        (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
+        (source / "conf.py").write_text(_conf(), encoding="utf-8")
+        # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
+        built = _sphinx(source, Path(tmp) / "build" / "html", Path(tmp) / "build" / "doctrees")
+        shutil.copytree(built, work, dirs_exist_ok=True)
+        _copy_mathjax(work / "_static" / MATHJAX_DIR)
         (work / MARKER).write_text("Written by python -m helpers site: the next build replaces this folder.\n")
     return Path(out_dir) / "index.html"
+
+
+def _add_notebook(path: Path, target: Path, execute: bool) -> None:
+    if not execute:
+        shutil.copyfile(path, target)
+        return
+    import nbformat
+    from nbclient import NotebookClient
+
+    notebook = nbformat.read(path, as_version=4)
+    log.info("executing %s", path.name)
+    # Its kernel draws 3-D views as pictures: a page on disk has no kernel to talk to.
+    with mock.patch.dict(os.environ, KERNEL_ENVIRONMENT):
+        where = {"metadata": {"path": str(path.parent)}}
+        NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
+    nbformat.write(notebook, target)
+
+
+def _conf() -> str:
+    lines = ['"""Generated by helpers.site.build: the book\'s Sphinx configuration."""', ""]
+    lines += [f"{key} = {value!r}" for key, value in CONF.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _index(source: Path, chapters: list[Path], solutions: list[Path], picture: bool) -> str:
+    """The landing page: the result, a line per page, and the book's order (its toctrees)."""
+    lines = [f"# {TITLE}", ""]
+    lines += [
+        "A drone flies over an aerial map and scans the ground with a lidar. These pages rebuild, one stage a page,",
+        "the whole SLAM pipeline that turns those scans into a trajectory and a map: registration of scan pairs,",
+        "submaps, loop closure and a pose graph, each measured against the ground truth the simulator keeps.",
+        "",
+    ]
+    if picture:
+        lines += [
+            f"```{{figure}} {RESULT_PICTURE.as_posix()}",
+            ":alt: the default flight: ground truth, odometry only, and the trajectory after loop closure",
+            "",
+            "Where the book ends: the odometry alone (red) drifts away from the true flight (green); after loop",
+            "closure and pose-graph optimisation (blue) the trajectory lies back on it.",
+            "```",
+            "",
+        ]
+    lines += ["## The pages", ""]
+    for path in chapters:
+        lines.append(f"- [{_title(source / path.name)}]({path.name}): {_summary(path)}")
+    if solutions:
+        lines += ["", "## Appendix", ""]
+        lines += [f"- [{_title(source / SOLUTIONS / p.name)}]({SOLUTIONS}/{p.name})" for p in solutions]
+    lines += ["", "```{toctree}", ":hidden:", ":caption: The tutorial", "", *[p.stem for p in chapters], "```"]
+    if solutions:
+        lines += ["", "```{toctree}", ":hidden:", ":caption: Appendix: solutions", ""]
+        lines += [*[f"{SOLUTIONS}/{p.stem}" for p in solutions], "```"]
+    return "\n".join(lines) + "\n"
+
+
+def _title(path: Path) -> str:
+    """The notebook's first top-level heading."""
+    import nbformat
+
+    for cell in nbformat.read(path, as_version=4).cells:
+        if cell.cell_type == "markdown":
+            for line in cell.source.splitlines():
+                if line.startswith("# "):
+                    return line[2:].strip()
+    return path.stem
+
+
+def _summary(path: Path) -> str:
+    """What the page teaches: SUMMARIES, else the first sentence after its title."""
+    if path.name[:2] in SUMMARIES:
+        return SUMMARIES[path.name[:2]]
+    import nbformat
+
+    for cell in nbformat.read(path, as_version=4).cells:
+        if cell.cell_type == "markdown":
+            for paragraph in cell.source.split("\n\n"):
+                if paragraph.strip() and not paragraph.lstrip().startswith("#"):
+                    return re.split(r"(?<=[.!?])\s", " ".join(paragraph.split()), maxsplit=1)[0]
+    return ""
+
+
+def _sphinx(source: Path, out: Path, doctrees: Path) -> Path:
+    """Sphinx's HTML build into ``out``; fails on a warning that means a broken page, logs the others."""
+    from sphinx.application import Sphinx
+    from sphinx.util.docutils import docutils_namespace, patch_docutils
+
+    status, messages = io.StringIO(), io.StringIO()
+    with patch_docutils(source), docutils_namespace(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # the theme's and myst's use of Sphinx, not ours to mend
+        warnings.simplefilter("ignore", PendingDeprecationWarning)
+        app = Sphinx(source, source, out, doctrees, "html", status=status, warning=messages, freshenv=True)
+        app.build(force_all=True)
+    text = ANSI_COLOUR.sub("", messages.getvalue()).replace(f"{source}{os.sep}", "")
+    reported = [line for line in text.splitlines() if line.strip()]
+    for line in reported:
+        log.warning("sphinx: %s", line)
+    fatal = [line for line in reported if FATAL_WARNINGS.search(line)]
+    if app.statuscode or fatal:
+        raise SlamError("the book has broken parts:\n" + "\n".join(fatal or reported))
+    return out
 
 
 def _copy_mathjax(target: Path) -> None:
@@ -71,36 +253,3 @@ def _copy_mathjax(target: Path) -> None:
         raise SlamError("the site needs MathJax: pip install jupyter-server-mathjax (see environment.txt)")
     source = Path(spec.submodule_search_locations[0]) / "static"
     shutil.copytree(source, target, ignore=shutil.ignore_patterns("localization"))
-
-
-def _title(notebook, path: Path) -> str:
-    for cell in notebook.cells:
-        if cell.cell_type == "markdown":
-            for line in cell.source.splitlines():
-                if line.startswith("# "):
-                    return line[2:].strip()
-    return path.stem
-
-
-def _index(pages) -> str:
-    items = "\n".join(f'    <li><a href="{html.escape(page)}">{html.escape(title)}</a></li>' for page, title in pages)
-    return f"""<!DOCTYPE html>
-<html lang="en">
-<head>
-  <meta charset="utf-8">
-  <title>Aerial lidar SLAM, step by step</title>
-  <style>
-    body {{ font-family: system-ui, sans-serif; max-width: 44rem; margin: 3rem auto; line-height: 1.5; }}
-    li {{ margin: 0.4rem 0; }}
-  </style>
-</head>
-<body>
-  <h1>Aerial lidar SLAM, step by step</h1>
-  <p>A drone flies over an aerial map and scans it with a lidar. These pages rebuild the
-  whole SLAM pipeline, one stage a page, from the simulated scans to the corrected map.</p>
-  <ol>
-{items}
-  </ol>
-</body>
-</html>
-"""
