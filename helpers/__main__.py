@@ -33,7 +33,7 @@ def main(argv=None) -> int:
         "are fitted to the flight's height and waypoint spacing: helpers.fitting)",
     )
 
-    site = sub.add_parser("site", help="execute the notebooks and export them as a static HTML site")
+    site = sub.add_parser("site", help="execute the notebooks and build them into a book that opens from disk")
     site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
     site.add_argument("--no-execute", action="store_true", help="export the notebooks as committed")
 
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
             from .site import build_site
 
             index = build_site(args.out, execute=not args.no_execute)
-            print(f"site written: {index}")
+            print(f"book written: {index}")
             return 0
     except SlamError as exc:
         print(f"error: {exc}", file=sys.stderr)

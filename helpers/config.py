@@ -151,7 +151,7 @@ class SensorConfig(_Table):
 
 @dataclass(frozen=True)
 class FeaturesConfig(_Table):
-    """What each scan is reduced to before registration, and how its features are matched (notebooks 2-3)."""
+    """What each scan is reduced to before registration, and how its features are matched (notebooks 2 and 3)."""
 
     TABLE: ClassVar[str] = "features"
     grid_step: float = _param(1.5, "cell of the grid-average downsampling before features, metres", "gridStep")

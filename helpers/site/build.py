@@ -41,13 +41,13 @@ MARKER = ".helpers-site"  # the file that marks a folder as a site this tool wro
 # What each page teaches, one line on the landing page (by the notebook's number; a notebook not listed
 # here gets the first sentence of its introduction).
 SUMMARIES = {
-    "01": "the map, the flight and the lidar's fan of rays; scans as the drone records them, played back",
-    "02": "every parameter of the pipeline, and what changing it does",
-    "03": "one pair of scans through downsampling, FPFH, matching, MSAC and ICP; then odometry and its drift",
-    "04": "consecutive scans merged into submaps, and why they make loop queries cheap",
-    "05": "recognising a place seen before, and measuring the loop edge that ties the two visits",
-    "06": "the GTSAM pose graph before and after optimisation, and a robust kernel against a wrong loop edge",
-    "07": "the rebuilt map scored against the truth, and what loop closure and the pose graph bought",
+    "01": "the map, the flight and the lidar's fan of rays; one scan cast by hand with Open3D; the footprint",
+    "02": "what each parameter controls, a picture each, and which defaults are the reference's and which are ours",
+    "03": "one pair of scans through Open3D's FPFH, matching, Kabsch, MSAC and ICP; odometry and its drift",
+    "04": "consecutive scans merged into submaps as they arrive, and which submaps a loop query may search",
+    "05": "recognising a place seen before; the reference's main loop written out and checked against the pipeline",
+    "06": "one loop edge on a line, the same chain in GTSAM factor by factor, then our graph and a robust kernel",
+    "07": "the rebuilt map scored against the truth, and the reference workflow against ours on the same flight",
 }
 
 # Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.
