@@ -6,26 +6,19 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..features import grid_average
-from . import report, unanswered
+from . import say, unanswered
 
 OVERLAP_RADIUS = 1.5  # m: a moving point is on shared ground when a fixed point lies this close (one grid cell)
-
-
-def _verdict(ok: bool, correct: str, hint: str) -> None:
-    """Print the check's one line (:func:`helpers.exercises.report`) and return
-    nothing: a value would show as a second output line in the notebook (a
-    trailing ``;`` does not hide it under nbval)."""
-    report(ok, correct, hint)
 
 
 def check_grid_step(step, scan, target: int = 3000, tolerance: float = 0.05) -> None:
     """Exercise 2.1: a grid step that leaves ``scan`` with ``target`` points, within ``tolerance``."""
     if unanswered(step):
-        return _verdict(False, "", "set `step` to a grid step in metres, then run this cell again")
+        return say(False, "", "set `step` to a grid step in metres, then run this cell again")
     kept = len(grid_average(scan, float(step)))
     ok = abs(kept - target) <= tolerance * target
     direction = "larger" if kept > target else "smaller"
-    return _verdict(
+    return say(
         ok,
         f"your grid step leaves the scan within {tolerance:.0%} of {target} points",
         f"a {float(step):g} m grid leaves {kept} points, not within {tolerance:.0%} of {target}: "
@@ -43,19 +36,17 @@ def footprint_overlap(dataset, fixed: int, moving: int, radius: float = OVERLAP_
 def check_skip_frames(gap, dataset, start: int = 150, least: float = 0.5) -> None:
     """Exercise 2.2: the largest gap after scan ``start`` whose overlap with it is still at least ``least``."""
     if unanswered(gap):
-        return _verdict(False, "", "set `gap` to a whole number of scans, then run this cell again")
+        return say(False, "", "set `gap` to a whole number of scans, then run this cell again")
     gap = int(gap)
     if gap < 1:
-        return _verdict(False, "", "a gap is at least 1 scan")
+        return say(False, "", "a gap is at least 1 scan")
     here = footprint_overlap(dataset, start, start + gap)
     beyond = footprint_overlap(dataset, start, start + gap + 1)
     if here < least:
-        return _verdict(False, "", f"scans {start} and {start + gap} share less than {least:.0%}: try a smaller gap")
+        return say(False, "", f"scans {start} and {start + gap} share less than {least:.0%}: try a smaller gap")
     if beyond >= least:
-        return _verdict(
-            False, "", f"scans {start} and {start + gap + 1} still share {least:.0%} or more: try a larger gap"
-        )
-    return _verdict(
+        return say(False, "", f"scans {start} and {start + gap + 1} still share {least:.0%} or more: try a larger gap")
+    return say(
         True,
         f"{gap} scans apart the two still share {least:.0%} of their ground, {gap + 1} apart they do not",
         "",

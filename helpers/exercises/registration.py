@@ -9,16 +9,9 @@ import numpy as np
 from ..errors import SlamError
 from ..geometry import rotation_angle_deg
 from ..registration import SAMPLE_SIZE, estimate_rigid_msac
-from . import report, unanswered
+from . import say, unanswered
 
 SUCCESS_M = 3.0  # a robust fit within this many metres of the truth leaves ICP an easy job (notebook 3)
-
-
-def _verdict(ok: bool, correct: str, hint: str) -> None:
-    """Print the check's one line (:func:`helpers.exercises.report`) and return
-    nothing: a value would show as a second output line in the notebook (a
-    trailing ``;`` does not hide it under nbval)."""
-    report(ok, correct, hint)
 
 
 def _rotations(count: int, seed: int = 0) -> np.ndarray:
@@ -38,21 +31,21 @@ def _rotations(count: int, seed: int = 0) -> np.ndarray:
 def check_rotation_angle(angle_deg, count: int = 20, tolerance: float = 1e-4) -> None:
     """Exercise 3.1: ``angle_deg(T)`` returns the rotation angle of a 4 x 4 transform in degrees."""
     if unanswered(angle_deg):
-        return _verdict(False, "", "define `angle_deg(T)`, then run this cell again")
+        return say(False, "", "define `angle_deg(T)`, then run this cell again")
     transforms = _rotations(count)
     truth = rotation_angle_deg(transforms)
     try:
         answers = np.array([float(angle_deg(T)) for T in transforms])
     except Exception as exc:  # a learner's function may raise anything
-        return _verdict(False, "", f"angle_deg raised {type(exc).__name__}: {exc}")
+        return say(False, "", f"angle_deg raised {type(exc).__name__}: {exc}")
     wrong = np.flatnonzero(~(np.abs(answers - truth) <= tolerance))
     if len(wrong):
         i = wrong[0]
         hint = f"for a rotation of {truth[i]:.4f} deg angle_deg gives {answers[i]:.4f}"
         if np.any(np.isnan(answers)):
             hint += " (a NaN: keep the cosine within [-1, 1] with np.clip)"
-        return _verdict(False, "", hint)
-    return _verdict(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
+        return say(False, "", hint)
+    return say(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
 
 
 def trials_for(w: float, confidence: float) -> int:
@@ -67,12 +60,12 @@ def check_trials(
     (``moving[i]`` to ``fixed[i]``) that ``T_true`` carries within
     ``max_distance``, and whether MSAC capped there finds the motion."""
     if unanswered(n_trials):
-        return _verdict(False, "", "set `n_trials` from the formula, then run this cell again")
+        return say(False, "", "set `n_trials` from the formula, then run this cell again")
     residual = np.linalg.norm(moving @ T_true[:3, :3].T + T_true[:3, 3] - fixed, axis=1)
     w = float(np.mean(residual < max_distance))
     expected = trials_for(w, confidence)
     if abs(int(n_trials) - expected) > max(1, 0.01 * expected):
-        return _verdict(False, "", f"with w = {w:.3f} and p = {confidence} the formula gives another number: check w^3")
+        return say(False, "", f"with w = {w:.3f} and p = {confidence} the formula gives another number: check w^3")
     hits = 0
     for seed in range(seeds):
         try:
@@ -81,7 +74,7 @@ def check_trials(
         except SlamError:
             pass
     ok = hits >= seeds - 1
-    return _verdict(
+    return say(
         ok,
         f"the formula's trials; capped there, MSAC lands within {SUCCESS_M:g} m "
         f"on at least {seeds - 1} of {seeds} seeds",
