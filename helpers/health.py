@@ -77,10 +77,11 @@ def assess(result) -> Health:
     fallbacks = [index for index, _ in odometry.fallbacks]
     poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
     weak = result.indices[1:][odometry.constraint < WEAK_CONSTRAINT]
-    revisits, unclosed = _revisits(result)
-    odometry_xyz, optimised_xyz = odometry.poses[:, :3, 3], result.graph.poses[:, :3, 3]
-    flown = float(np.linalg.norm(np.diff(odometry_xyz, axis=0), axis=1).sum())
-    correction = float(np.linalg.norm(optimised_xyz - odometry_xyz, axis=1).max()) if len(odometry_xyz) else 0.0
+    positions = odometry.poses[:, :3, 3]
+    flown_to = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
+    revisits, unclosed = _revisits(result, flown_to)
+    flown = float(flown_to[-1])
+    correction = float(np.linalg.norm(result.graph.poses[:, :3, 3] - positions, axis=1).max())
     norms = result.graph.loop_whitened_norm
     against = [loop for loop, norm in zip(result.loops, norms, strict=True) if norm > FALSE_LOOP_SIGMAS]
     counts = {
@@ -162,15 +163,15 @@ def _some(indices, shown: int = 6) -> str:
     return ", ".join(runs) if len(runs) <= shown else ", ".join(runs[:shown]) + ", ..."
 
 
-def _revisits(result) -> tuple[int, int]:
+def _revisits(result, flown: np.ndarray) -> tuple[int, int]:
     """Nodes whose odometry position comes back within the loop search radius of
     a node left more than ``LEFT_FACTOR`` radii of flight earlier (revisits),
-    and how many of them have no loop edge within that radius of flight."""
+    and how many of them have no loop edge within that radius of flight.
+    ``flown``: the distance flown to each node, along the odometry."""
     positions = result.odometry.poses[:, :3, 3]
     if len(positions) < 3:
         return 0, 0
     radius = result.config.loop_closure.loop_closure_search_radius
-    flown = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     near = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2) < radius
     left = (flown[:, None] - flown[None, :]) > LEFT_FACTOR * radius  # row k flew that far since column i
     revisit = (near & left).any(axis=1)

@@ -170,7 +170,8 @@ def submaps_and_loops(clouds, poses, config: Config, icp, progress: bool = False
 def loop_query(node: int, cloud, pose, submaps: SubmapIndex, clouds, poses, icp, config: Config):
     """One loop query of node ``node``: (1) the old submaps near its pose,
     verified by ICP; (2) the best scan of the matching submaps, kept as a loop
-    edge if its RMSE is below ``rmse_threshold``. None if no submap was registered."""
+    edge if its RMSE is below ``rmse_threshold`` and it pins the motion
+    (constraint at least ``min_constraint``). None if no submap was registered."""
     loops = config.loop_closure
     # 1. Old submaps within the (growing) search radius, verified by ICP.
     candidates = find_loop_candidates(
