@@ -1,6 +1,6 @@
 """The parameter table and one picture per parameter of notebook 2: what each
 value controls, drawn on one scan before any registration is run (the sweeps
-that need FPFH, MSAC or ICP are in :mod:`.registration_figures`)."""
+that need FPFH, MSAC or ICP are in :mod:`.sweep_figures`)."""
 
 from __future__ import annotations
 

@@ -15,15 +15,12 @@ from .registration_figures import (
     descriptor_figure,
     icp_convergence_figure,
     matches_figure,
-    matching_figure,
-    neighbors_figure,
     profile_figure,
-    skip_frames_figure,
     step_errors_figure,
     surface_error_figure,
     trajectory_figure,
-    trials_figure,
 )
+from .sweep_figures import matching_figure, neighbors_figure, skip_frames_figure, trials_figure
 
 __all__ = [
     "clouds_figure",

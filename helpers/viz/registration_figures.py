@@ -1,5 +1,5 @@
-"""Figures for notebook 3: one pair of scans, step by step, each step's parameter sweep right after
-it, then the odometry."""
+"""Figures for notebook 3: one pair of scans, step by step, then the odometry (the parameter
+sweeps shown after each step are in :mod:`.sweep_figures`)."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ from matplotlib.colors import LogNorm
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from ..geometry import transform_points
-from .parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
-from .style import COLORS, xy_of
+from .parameter_figures import MATCH_COLORS, _grid
+from .style import COLORS, ERROR_CMAP, HEIGHT_CMAP, xy_of
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
 HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")
@@ -29,7 +29,7 @@ def clouds_figure(moving, fixed, names=("moving", "fixed")):
     low, high = np.percentile(np.concatenate([moving[:, 2], fixed[:, 2]]), [1, 99])
     fig, axes = plt.subplots(2, 1, figsize=(10, 5.2), sharex=True, constrained_layout=True)
     for ax, points, name, key in zip(axes, (moving, fixed), names, ("moving", "fixed"), strict=True):
-        art = _top_view(ax, points, scalars=points[:, 2], size=3, cmap="gist_earth", vmin=low, vmax=high)
+        art = _top_view(ax, points, scalars=points[:, 2], size=3, cmap=HEIGHT_CMAP, vmin=low, vmax=high)
         ax.set_title(f"{name}: {len(points)} points", color=COLORS[key], fontweight="bold", loc="left")
         ax.set(ylabel="x, forward (m)", aspect="equal")
     axes[-1].set_xlabel("y, to the left of the drone (m)")
@@ -139,7 +139,7 @@ def surface_error_figure(moving, errors: dict, low: float = 0.01, high: float = 
     norm = LogNorm(low, high, clip=True)
     for ax, (title, distance) in zip(axes, errors.items(), strict=True):
         order = np.argsort(distance)  # the worst points on top
-        art = _top_view(ax, moving[order], scalars=np.maximum(distance[order], low), size=3, cmap="viridis", norm=norm)
+        art = _top_view(ax, moving[order], scalars=np.maximum(distance[order], low), size=3, cmap=ERROR_CMAP, norm=norm)
         ax.set_title(f"{title}: median {np.median(distance) * 100:.0f} cm", loc="left")
         ax.set(ylabel="x (m)", aspect="equal")
     axes[-1].set_xlabel("y, to the left of the drone (m)")
@@ -272,116 +272,3 @@ def _shade(ax, x, mask):
     edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
     for start, stop in zip(edges[::2], edges[1::2], strict=True):
         ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)
-
-
-# The parameter sweeps, each shown right after the step it tunes.
-
-
-def _stacked_matches(ax, x, correct, total, width, xlabel, default, log=False):
-    correct, total = np.asarray(correct), np.asarray(total)
-    ax.bar(x, correct, width, color=CORRECT_COLORS["correct"], label="correct")
-    ax.bar(x, total - correct, width, bottom=correct, color=CORRECT_COLORS["wrong"], label="wrong")
-    ax.set(xlabel=xlabel, ylabel="matches", ylim=(0, 1.3 * total.max()))  # room for the legend
-    share = ax.twinx()
-    share.plot(x, 100 * correct / np.maximum(total, 1), "o-", color="black", lw=1.6, label="share correct")
-    share.set(ylabel="share correct (%)", ylim=(0, 1.3 * 100 * (correct / np.maximum(total, 1)).max()))
-    if log:
-        ax.set_xscale("log")
-    _grid(ax)
-    share.spines["top"].set_visible(False)
-    _mark_default(ax, default)
-    return share
-
-
-def neighbors_figure(neighbors, n_correct, n_matches, default: int = 60):
-    """Matches (correct ones in colour) and the share correct against the FPFH neighbourhood size."""
-    fig, ax = plt.subplots(figsize=(7.5, 3.8), constrained_layout=True)
-    widths = 0.25 * np.asarray(neighbors, float)
-    share = _stacked_matches(ax, neighbors, n_correct, n_matches, widths, "neighbours (k)", default, log=True)
-    ax.set_xticks(neighbors, [str(k) for k in neighbors])
-    ax.minorticks_off()
-    _legend(ax, share)
-    ax.set_title("more neighbours, more telling descriptors")
-    return fig
-
-
-def matching_figure(thresholds, th_correct, th_total, ratios, ra_correct, ra_total, defaults=(0.1, 0.97)):
-    """Matches and share correct against the match threshold (left) and the ratio (right)."""
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
-    x_th, x_ra = np.arange(len(thresholds)), np.arange(len(ratios))
-    s1 = _stacked_matches(left, x_th, th_correct, th_total, 0.6, "match threshold", list(thresholds).index(defaults[0]))
-    s2 = _stacked_matches(right, x_ra, ra_correct, ra_total, 0.6, "match ratio", list(ratios).index(defaults[1]))
-    left.set_xticks(x_th, [f"{v:g}" for v in thresholds])
-    right.set_xticks(x_ra, [f"{v:g}" for v in ratios])
-    left.set_title(f"match_threshold (ratio {defaults[1]:g})")
-    right.set_title(f"match_ratio (threshold {defaults[0]:g})")
-    top = max(s1.get_ylim()[1], s2.get_ylim()[1])
-    s1.set_ylim(0, top)
-    s2.set_ylim(0, top)
-    bottom = max(left.get_ylim()[1], right.get_ylim()[1])
-    left.set_ylim(0, bottom)
-    right.set_ylim(0, bottom)
-    _legend(left, s1)
-    return fig
-
-
-def _legend(ax, twin):
-    handles, labels = ax.get_legend_handles_labels()
-    h2, l2 = twin.get_legend_handles_labels()
-    ax.legend(handles + h2, labels + l2, loc="upper left", fontsize=9, framealpha=0.9)
-
-
-def skip_frames_figure(gaps, overlap, n_inliers, error_cm, failed, default: int = 3):
-    """Overlap, MSAC inliers and final translation error against the gap between two scans."""
-    gaps, failed = np.asarray(gaps), np.asarray(failed, bool)
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
-    axes[0].plot(gaps, 100 * np.asarray(overlap), "o-", color=COLORS["fixed"], lw=2)
-    axes[0].set(ylabel="overlap (%)", title="shared ground", ylim=(0, 100))
-    axes[1].plot(gaps, n_inliers, "o-", color=MATCH_COLORS["inlier"], lw=2)
-    axes[1].set(ylabel="MSAC inliers", title="matches the robust fit keeps", ylim=(0, None))
-    error = np.asarray(error_cm, float)
-    axes[2].plot(gaps, error, "-", color=COLORS["odometry"], lw=1.5)
-    axes[2].plot(gaps[~failed], error[~failed], "o", color=COLORS["odometry"], label="registered")
-    axes[2].plot(gaps[failed], error[failed], "X", color="black", ms=10, label="fallback: ICP from a guess")
-    axes[2].set(ylabel="translation error (cm)", title="error after ICP", yscale="log")
-    axes[2].yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-    axes[2].yaxis.set_major_formatter(FormatStrFormatter("%g"))
-    axes[2].yaxis.set_minor_formatter(NullFormatter())
-    axes[2].legend(fontsize=9, loc="upper left")
-    for ax in axes:
-        ax.set_xlabel("skip_frames (scans between the two)")
-        ax.set_xticks(gaps)
-        _grid(ax)
-        _mark_default(ax, default)
-    return fig
-
-
-def trials_figure(trials, probability, success, w: float, default: int = 3000):
-    """The chance that MSAC draws at least one all-inlier sample (formula) and
-    the measured share of seeds whose coarse fit lands close to the truth."""
-    trials = np.asarray(trials)
-    fig, ax = plt.subplots(figsize=(7.5, 3.8), constrained_layout=True)
-    n = np.geomspace(trials.min(), trials.max() * 1.5, 200)
-    ax.plot(n, 100 * (1 - (1 - w**3) ** n), color="black", lw=1.5, label=f"$1-(1-w^3)^N$, $w$ = {w:.2f}")
-    ax.plot(trials, 100 * np.asarray(probability), "o", color="black")
-    ax.plot(
-        trials,
-        100 * np.asarray(success),
-        "s--",
-        color=COLORS["optimized"],
-        lw=1.5,
-        label="measured: coarse fit within 3 m, over seeds",
-    )
-    ax.set(
-        xscale="log",
-        xlabel="max_num_trials (N)",
-        ylabel="probability (%)",
-        ylim=(0, 105),
-        title="how many hypotheses are enough",
-    )
-    ax.set_xticks(trials, [str(t) for t in trials])
-    ax.minorticks_off()
-    _grid(ax)
-    _mark_default(ax, default, top=False)
-    ax.legend(fontsize=9, loc="upper left")
-    return fig
