@@ -4,7 +4,7 @@
 - :mod:`~helpers.viz.display`: where 3-D views are drawn (off-screen VTK,
   interactive only in a live JupyterLab kernel).
 - :mod:`~helpers.viz.render`: point clouds with PyVista, figures as still
-  images, the scan player.
+  images; :mod:`~helpers.viz.player`: the scan player.
 - Figures by notebook: :mod:`~helpers.viz.parameter_figures` (2),
   :mod:`~helpers.viz.registration_figures` and :mod:`~helpers.viz.sweep_figures` (3),
   :mod:`~helpers.viz.submap_figures` (4), :mod:`~helpers.viz.loop_figures` (5),
