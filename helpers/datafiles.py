@@ -156,7 +156,7 @@ def main(argv=None) -> int:
     try:
         for path in write_reference_files(args.folder):
             print(f"wrote {path} ({path.stat().st_size:,} bytes)")
-    except SlamError as exc:
+    except (SlamError, OSError) as exc:  # OSError: a folder that cannot be written, a full disk
         print(f"error: {exc}", file=sys.stderr)
         return 2
     return 0
