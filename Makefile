@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 # Debian package : shared library it provides (checked with ldconfig)
 SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 
-.PHONY: run test robustness lint notebooks html sysdeps browser setup clean
+.PHONY: run test robustness lint notebooks html sysdeps browser setup clean data
 
 # OpenMP threads (Open3D, small_gicp) spin after each parallel call and starve numpy's unless told to
 # sleep; it must be set before Open3D loads, so here rather than in the package (13 % faster registration).
@@ -36,6 +36,11 @@ robustness: $(STAMP)
 	$(PY) tests/mutants.py
 
 setup: $(STAMP)
+
+# data/: the default flight in the reference's file formats (aerialMap.tar.gz, gTruthWayPoints.mat), written
+# by the package; tests/test_datafiles.py fails when the committed files and the package disagree.
+data: $(STAMP)
+	$(PY) -m helpers.datafiles data
 
 $(STAMP): environment.txt pyproject.toml | sysdeps
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found; install Python 3.11 (Debian: apt-get install python3.11 python3.11-venv)" >&2; exit 1; }

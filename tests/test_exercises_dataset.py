@@ -1,23 +1,18 @@
 """The checks of notebook 1's exercises say ``correct`` for a right answer
-and ``not yet`` for a wrong or missing one."""
+and ``not yet`` for a wrong or missing one, on the session's default dataset
+(``default_dataset``, tests/conftest.py)."""
 
 import numpy as np
-import pytest
 
-from helpers import create_dataset
 from helpers.exercises import dataset as exercises
-
-
-@pytest.fixture(scope="module")
-def data():
-    return create_dataset()
 
 
 def said(capsys) -> str:
     return capsys.readouterr().out.split(":")[0]
 
 
-def test_the_edge_ray_check_takes_the_hit_and_refuses_others(data, capsys):
+def test_the_edge_ray_check_takes_the_hit_and_refuses_others(default_dataset, capsys):
+    data = default_dataset
     pose = data.poses[250]
     a = np.radians(data.sensor.azimuth[1])
     hit = exercises.edge_ray(data, 250)
@@ -28,7 +23,8 @@ def test_the_edge_ray_check_takes_the_hit_and_refuses_others(data, capsys):
         assert not exercises.check_edge_ray(wrong, data, 250) and said(capsys) == "not yet"
 
 
-def test_the_footprint_check_takes_the_width_and_refuses_others(data, capsys):
+def test_the_footprint_check_takes_the_width_and_refuses_others(default_dataset, capsys):
+    data = default_dataset
     sensor, depth = data.sensor, 600.0
     width = 2 * depth * np.tan(np.radians(13.0))
     assert exercises.check_footprint_width(width, sensor, depth, data.scans[::50]) and said(capsys) == "correct"

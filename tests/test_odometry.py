@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from helpers.config import Config
+from helpers.config import Config, default_noise_seed
 from helpers.errors import SlamError
 from helpers.metrics import ate, rpe
 from helpers.odometry import Frame, prepare, register_frames, run_odometry
@@ -38,15 +38,22 @@ STEP_BOUND_M = 0.3  # no step of the whole default flight is further off (benchm
 NUDGE_BOUND_M = 0.15
 
 
-@pytest.mark.parametrize("noise_seed", [0, 1, 2])
-def test_every_step_stays_within_bounds_whatever_the_noise(flight_over, noise_seed):
+# Three lidar noises: the fixtures' own (the default seed, whose flight and odometry are reused) and two others.
+NOISE_SEEDS = [default_noise_seed()] + [seed for seed in (0, 1, 2) if seed != default_noise_seed()][:2]
+
+
+@pytest.mark.parametrize("noise_seed", NOISE_SEEDS)
+def test_every_step_stays_within_bounds_whatever_the_noise(flight_over, flight, odometry, noise_seed):
     """The same stretch under three lidar noises: every step within the same
     bound of the true motion and none falling back; and nudging every point
     by up to a micrometre (far more than the last-bit differences between
     CPUs) moves no step by more than a few centimetres."""
-    data = flight_over(WAYPOINT_ROWS, noise_seed=noise_seed)
     config = Config()
-    result = run_odometry(data, config=config)
+    if noise_seed == flight.sensor.seed:
+        data, result = flight, odometry
+    else:
+        data = flight_over(WAYPOINT_ROWS, noise_seed=noise_seed)
+        result = run_odometry(data, config=config)
     truth = np.linalg.inv(data.poses[result.indices[:-1]]) @ data.poses[result.indices[1:]]
     error = np.linalg.norm(result.relative[:, :3, 3] - truth[:, :3, 3], axis=1)
     assert result.fallbacks == [] and error.max() < STEP_BOUND_M, error.max()
