@@ -31,25 +31,28 @@ from typing import ClassVar
 import numpy as np
 
 from .errors import SlamError
+from .limits import (
+    MAX_EDGES_BACK,
+    MAX_ITERATIONS,
+    MAX_LENGTH,
+    MAX_NEIGHBORS,
+    MAX_RADIUS,
+    MAX_RANGE,
+    MAX_RAYS_PER_FLIGHT,
+    MAX_RAYS_PER_SCAN,
+    MAX_SCANS,
+    MAX_TRIALS,
+    MIN_GRID,
+    MIN_RMSE,
+    MIN_SIGMA,
+    POINT_BYTES,
+    RAY_BYTES,
+    BoundedTable,
+    angle_count,
+    human_size,
+)
 
 NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # the default lidar noise seed, when set (the tests' robustness run)
-
-# What a configuration may ask for: generous for real use, far below what would exhaust a machine.
-MAX_RAYS_PER_SCAN = 1_000_000  # 118 times the default fan (326 x 26 = 8476 rays)
-MAX_RAYS_PER_FLIGHT = 200_000_000  # all scans together: 34 times the default flight (689 scans)
-RAY_BYTES = 160  # memory a ray takes while its scan is cast (measured 157 on a 325k-ray fan)
-POINT_BYTES = 40  # memory a return keeps until the flight is written (measured 37)
-MAX_TRIALS = 1_000_000  # robust-fit hypotheses (the default draws 3000; their samples take 24 bytes each)
-MAX_NEIGHBORS = 1_000  # neighbours of a normal or FPFH (the default takes 60)
-MAX_EDGES_BACK = 100  # each is one more registration per scan (the default makes 4)
-MAX_ITERATIONS = 10_000  # ICP iterations
-MAX_SCANS = 1_000_000  # waypoints of a flight, one scan each (1450 times the default flight)
-MIN_GRID = 0.01  # m: a grid step finer than a centimetre is far below the lidar's noise
-MAX_LENGTH = 1_000.0  # m: grid steps and distances; a kilometre is a whole scan's width at the default height
-MAX_RADIUS = 10_000.0  # m: a search radius beyond any tile (MAX_MAP_CELLS at 1 m is about 7 km across)
-MAX_RANGE = 1_000_000.0  # m: lidar range; a thousand times the default and still finite in float32 rays
-MIN_RMSE = 0.001  # m: RMSE thresholds; a millimetre is below any lidar's noise
-MIN_SIGMA = 1e-6  # edge sigmas: 1e-12 information already; a smaller sigma's square inverse overflows
 
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
@@ -71,48 +74,13 @@ def default_noise_seed() -> int:
     return int(value)
 
 
-def angle_count(start: float, stop: float, step: float) -> int:
-    """How many angles ``start, start + step, ...`` up to ``stop`` a ray fan has."""
-    return math.floor((stop - start) / step + 1e-9) + 1
-
-
-def human_size(nbytes: float) -> str:
-    """A byte count in words: '189 TiB'."""
-    for unit in ("bytes", "KiB", "MiB", "GiB"):
-        if nbytes < 1024:
-            return f"{nbytes:.3g} {unit}"
-        nbytes /= 1024
-    return f"{nbytes:.3g} TiB"
-
-
 def _param(default, help: str, reference: str | None = None, **kwargs):
     """A parameter with its meaning and the reference's name for it (None: ours alone)."""
     return field(default=default, metadata={"help": help, "reference": reference}, **kwargs)
 
 
-class _Table:
-    """Checks shared by the stage tables: each names its TOML table in ``TABLE``."""
-
-    TABLE: ClassVar[str]
-
-    def _check(self, name: str, ok, expected: str) -> None:
-        value = getattr(self, name)
-        if not ok(value):
-            raise SlamError(f"[{self.TABLE}] {name} must be {expected}, got {value!r}")
-
-    def _within(self, name: str, low: int, high: int) -> None:
-        self._check(name, lambda v: low <= v <= high, f"an integer from {low:,} to {high:,}")
-
-    def _between(self, name: str, low: float, high: float, what: str) -> None:
-        """``low <= value <= high`` (NaN fails); ``what`` begins the sentence: 'a positive number of metres'."""
-        self._check(name, lambda v: low <= v <= high, f"{what} from {low:g} to {high:g}")
-
-    def _one_of(self, name: str, choices: tuple[str, ...]) -> None:
-        self._check(name, lambda v: v in choices, f"one of {', '.join(choices)}")
-
-
 @dataclass(frozen=True)
-class SensorConfig(_Table):
+class SensorConfig(BoundedTable):
     """The simulated lidar and how it flies (notebook 1)."""
 
     TABLE: ClassVar[str] = "sensor"
@@ -166,7 +134,7 @@ class SensorConfig(_Table):
 
 
 @dataclass(frozen=True)
-class FeaturesConfig(_Table):
+class FeaturesConfig(BoundedTable):
     """What each scan is reduced to before registration, and how its features are matched (notebooks 2 and 3)."""
 
     TABLE: ClassVar[str] = "features"
@@ -187,7 +155,7 @@ class FeaturesConfig(_Table):
 
 
 @dataclass(frozen=True)
-class RegistrationConfig(_Table):
+class RegistrationConfig(BoundedTable):
     """Which scans are registered, the robust fit and ICP (notebook 3)."""
 
     TABLE: ClassVar[str] = "registration"
@@ -241,7 +209,7 @@ class RegistrationConfig(_Table):
 
 
 @dataclass(frozen=True)
-class MapConfig(_Table):
+class MapConfig(BoundedTable):
     """How registered scans are merged into submaps and the map (notebooks 4 and 7)."""
 
     TABLE: ClassVar[str] = "map"
@@ -255,7 +223,7 @@ class MapConfig(_Table):
 
 
 @dataclass(frozen=True)
-class LoopClosureConfig(_Table):
+class LoopClosureConfig(BoundedTable):
     """Which old submaps a scan is compared with, and when a match is a loop (notebook 5)."""
 
     TABLE: ClassVar[str] = "loop_closure"
@@ -293,7 +261,7 @@ class LoopClosureConfig(_Table):
 
 
 @dataclass(frozen=True)
-class PoseGraphConfig(_Table):
+class PoseGraphConfig(BoundedTable):
     """The pose graph's extra edges, weights and robust kernel (notebook 6).
 
     With the reference's identity weights a rotation of 0.1 rad costs as

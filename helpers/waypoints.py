@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import MAX_SCANS
 from .errors import SlamError
+from .limits import MAX_SCANS
 
 DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
 MAX_WAYPOINTS = MAX_SCANS  # one scan each
