@@ -81,7 +81,7 @@ def read_map(path: str | Path) -> AerialMap:
         try:
             return _read_las(tile)
         except SlamError:  # a rejected tile is not kept in the cache
-            _forget(tile)
+            _forget(tile.parent, tile)
             raise
     if not name.endswith((".las", ".laz")):
         raise SlamError(f"map must be a .las, .laz or .tar.gz file, got {path.name}")
@@ -194,10 +194,10 @@ def _extract_las(archive: Path) -> Path:
             limit = min(member.size, MAX_TILE_BYTES)
             paths.write_atomically(target, lambda out: _copy_at_most(head, source, out, limit, name))
     except (tarfile.TarError, OSError, EOFError, zlib.error) as exc:
-        _forget(target or target_dir / "none")
+        _forget(target_dir, target)
         raise SlamError(f"{archive.name} is not a readable .tar.gz archive ({exc})") from None
     except SlamError:
-        _forget(target or target_dir / "none")
+        _forget(target_dir, target)
         raise
     return target
 
@@ -242,12 +242,13 @@ def _copy_at_most(head: bytes, source, out, limit: int, name: str) -> None:
         out.write(chunk)
 
 
-def _forget(tile: Path) -> None:
-    """Remove an extracted tile and its cache folder (and ``maps/`` if that leaves it empty)."""
-    tile.unlink(missing_ok=True)
-    for folder in (tile.parent, tile.parent.parent):
+def _forget(folder: Path, tile: Path | None) -> None:
+    """Remove an extracted ``tile`` (if any), then ``folder`` and ``maps/`` above it if that leaves them empty."""
+    if tile is not None:
+        tile.unlink(missing_ok=True)
+    for empty in (folder, folder.parent):
         try:
-            folder.rmdir()  # only an empty folder goes
+            empty.rmdir()  # only an empty folder goes
         except OSError:
             break
 
