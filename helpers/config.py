@@ -112,7 +112,8 @@ class SensorConfig(BoundedTable):
                 f"[sensor] asks for {rays:.2g} rays per scan (about {human_size(rays * RAY_BYTES)} of ray "
                 f"buffers); the limit is {MAX_RAYS_PER_SCAN:,} rays: use larger azimuth or elevation steps"
             )
-        self._between("altitude", -10_000.0, 100_000.0, "a finite number of metres")  # below the sea, above the air
+        # From a deep-sea trench to the edge of space: every map's heights lie between.
+        self._between("altitude", -10_000.0, 100_000.0, "a finite number of metres")
         self._between("max_range", 1.0, MAX_RANGE, "a positive number of metres")
         self._between("range_noise", 0.0, self.max_range, "zero or a positive number of metres up to max_range,")
         self._check("dropout", lambda v: 0 <= v < 1, "a probability in [0, 1)")

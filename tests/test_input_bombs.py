@@ -85,6 +85,17 @@ def test_zeros_that_expand_far_beyond_a_real_tile_are_refused_and_nothing_is_kep
     assert _cache_files(tmp_path) == []
 
 
+def test_a_bomb_on_the_command_line_is_one_error_line_within_seconds(tmp_path, capsys):
+    archive = tmp_path / "bomb.tar.gz"
+    _tar_gz(archive, "tile.laz", 200 << 20, _zeros(200 << 20))  # 200 MiB of zeros in about 200 kB
+    start = time.perf_counter()
+    assert main(["dataset", "--map", str(archive), "--out", str(tmp_path / "o")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: tile.laz in bomb.tar.gz expands to 200 MiB"), lines
+    assert time.perf_counter() - start < 5
+    assert not (tmp_path / "o").exists() and _cache_files(tmp_path) == []
+
+
 def test_the_size_cap_holds_while_streaming(tmp_path, monkeypatch):
     import helpers.mapio
 
