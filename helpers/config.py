@@ -13,7 +13,11 @@ holds its meaning and, where the reference has it, the reference's
     sub_map_thresh = 15              # submaps
 
 Out-of-range values are refused when a table is built, with one sentence
-saying which and why.
+saying which and why. Every value has a lower and an upper bound: far wider
+than any real flight needs, narrow enough that everything computed from it
+stays finite (no squared length overflows, no sigma's inverse is infinite) and
+means something (a grid step is at least a centimetre, a length at most a few
+kilometres, a count at most what a flight may have scans).
 """
 
 from __future__ import annotations
@@ -27,18 +31,28 @@ from typing import ClassVar
 import numpy as np
 
 from .errors import SlamError
+from .limits import (
+    MAX_EDGES_BACK,
+    MAX_ITERATIONS,
+    MAX_LENGTH,
+    MAX_NEIGHBORS,
+    MAX_RADIUS,
+    MAX_RANGE,
+    MAX_RAYS_PER_FLIGHT,
+    MAX_RAYS_PER_SCAN,
+    MAX_SCANS,
+    MAX_TRIALS,
+    MIN_GRID,
+    MIN_RMSE,
+    MIN_SIGMA,
+    POINT_BYTES,
+    RAY_BYTES,
+    BoundedTable,
+    angle_count,
+    human_size,
+)
 
 NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # the default lidar noise seed, when set (the tests' robustness run)
-
-# What a configuration may ask for: generous for real use, far below what would exhaust a machine.
-MAX_RAYS_PER_SCAN = 1_000_000  # 118 times the default fan (326 x 26 = 8476 rays)
-MAX_RAYS_PER_FLIGHT = 200_000_000  # all scans together: 34 times the default flight (689 scans)
-RAY_BYTES = 160  # memory a ray takes while its scan is cast (measured 157 on a 325k-ray fan)
-POINT_BYTES = 40  # memory a return keeps until the flight is written (measured 37)
-MAX_TRIALS = 1_000_000  # robust-fit hypotheses (the default draws 3000; their samples take 24 bytes each)
-MAX_NEIGHBORS = 1_000  # neighbours of a normal or FPFH (the default takes 60)
-MAX_EDGES_BACK = 100  # each is one more registration per scan (the default makes 4)
-MAX_ITERATIONS = 10_000  # ICP iterations
 
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
@@ -60,48 +74,13 @@ def default_noise_seed() -> int:
     return int(value)
 
 
-def angle_count(start: float, stop: float, step: float) -> int:
-    """How many angles ``start, start + step, ...`` up to ``stop`` a ray fan has."""
-    return math.floor((stop - start) / step + 1e-9) + 1
-
-
-def human_size(nbytes: float) -> str:
-    """A byte count in words: '189 TiB'."""
-    for unit in ("bytes", "KiB", "MiB", "GiB"):
-        if nbytes < 1024:
-            return f"{nbytes:.3g} {unit}"
-        nbytes /= 1024
-    return f"{nbytes:.3g} TiB"
-
-
 def _param(default, help: str, reference: str | None = None, **kwargs):
     """A parameter with its meaning and the reference's name for it (None: ours alone)."""
     return field(default=default, metadata={"help": help, "reference": reference}, **kwargs)
 
 
-def _positive(v) -> bool:
-    return math.isfinite(v) and v > 0
-
-
-class _Table:
-    """Checks shared by the stage tables: each names its TOML table in ``TABLE``."""
-
-    TABLE: ClassVar[str]
-
-    def _check(self, name: str, ok, expected: str) -> None:
-        value = getattr(self, name)
-        if not ok(value):
-            raise SlamError(f"[{self.TABLE}] {name} must be {expected}, got {value!r}")
-
-    def _within(self, name: str, low: int, high: int) -> None:
-        self._check(name, lambda v: low <= v <= high, f"an integer from {low:,} to {high:,}")
-
-    def _one_of(self, name: str, choices: tuple[str, ...]) -> None:
-        self._check(name, lambda v: v in choices, f"one of {', '.join(choices)}")
-
-
 @dataclass(frozen=True)
-class SensorConfig(_Table):
+class SensorConfig(BoundedTable):
     """The simulated lidar and how it flies (notebook 1)."""
 
     TABLE: ClassVar[str] = "sensor"
@@ -122,15 +101,21 @@ class SensorConfig(_Table):
                     f"[sensor] {name} must be [start, stop, step] degrees with "
                     f"-89 < start <= stop < 89 and a finite step > 0, got {list(value)}"
                 )
+            if stop - start < step * (1 - 1e-9):  # angle_count would be 1
+                raise SlamError(
+                    f"[sensor] {name} must hold at least two angles (stop - start >= step), got {list(value)}: "
+                    "a fan of one row or one column is a line, and scans of a line cannot be registered"
+                )
         rays = math.prod((stop - start) / step + 1 for start, stop, step in (self.azimuth, self.elevation))
         if rays > MAX_RAYS_PER_SCAN:
             raise SlamError(
                 f"[sensor] asks for {rays:.2g} rays per scan (about {human_size(rays * RAY_BYTES)} of ray "
                 f"buffers); the limit is {MAX_RAYS_PER_SCAN:,} rays: use larger azimuth or elevation steps"
             )
-        self._check("altitude", math.isfinite, "a finite number of metres")
-        self._check("max_range", _positive, "a positive number of metres")
-        self._check("range_noise", lambda v: 0 <= v < math.inf, "zero or a positive number of metres")
+        # From a deep-sea trench to the edge of space: every map's heights lie between.
+        self._between("altitude", -10_000.0, 100_000.0, "a finite number of metres")
+        self._between("max_range", 1.0, MAX_RANGE, "a positive number of metres")
+        self._between("range_noise", 0.0, self.max_range, "zero or a positive number of metres up to max_range,")
         self._check("dropout", lambda v: 0 <= v < 1, "a probability in [0, 1)")
         self._check("seed", lambda v: isinstance(v, int) and v >= 0, "a non-negative integer")
 
@@ -150,7 +135,7 @@ class SensorConfig(_Table):
 
 
 @dataclass(frozen=True)
-class FeaturesConfig(_Table):
+class FeaturesConfig(BoundedTable):
     """What each scan is reduced to before registration, and how its features are matched (notebooks 2 and 3)."""
 
     TABLE: ClassVar[str] = "features"
@@ -163,15 +148,15 @@ class FeaturesConfig(_Table):
     match_ratio: float = _param(0.97, "ratio test: best / second-best distance must be below it", "matchRatio")
 
     def __post_init__(self):
-        self._check("grid_step", _positive, "a positive number")
+        self._between("grid_step", MIN_GRID, MAX_LENGTH, "a positive number of metres")
         self._within("neighbors", 3, MAX_NEIGHBORS)
-        self._check("keypoint_share", lambda v: 0 < v <= 1, "in (0, 1]")
+        self._between("keypoint_share", 0.01, 1.0, "a share (below 1 %, too few matches for a rigid fit)")
         self._check("match_threshold", lambda v: 0 < v <= 1, "in (0, 1]")
         self._check("match_ratio", lambda v: 0 < v <= 1, "in (0, 1]")
 
 
 @dataclass(frozen=True)
-class RegistrationConfig(_Table):
+class RegistrationConfig(BoundedTable):
     """Which scans are registered, the robust fit and ICP (notebook 3)."""
 
     TABLE: ClassVar[str] = "registration"
@@ -204,25 +189,28 @@ class RegistrationConfig(_Table):
 
     def __post_init__(self):
         self._check("skip_frames", lambda v: v >= 1, "an integer of at least 1")
-        self._check("max_distance", _positive, "a positive number")
+        self._within("skip_frames", 1, MAX_SCANS)
+        self._between("max_distance", MIN_GRID, MAX_LENGTH, "a positive number of metres")
         self._within("max_num_trials", 1, MAX_TRIALS)
         self._check("confidence", lambda v: 0 < v < 1, "in (0, 1)")
         self._check("seed", lambda v: v >= 0, "zero or a positive integer")
         self._one_of("metric", METRICS)
         self._one_of("icp_backend", ICP_BACKENDS)
-        self._check("inlier_distance", _positive, "a positive number")
-        self._check("icp_grid_step", lambda v: math.isfinite(v) and v >= 0, "zero or a positive number")
+        self._between("inlier_distance", MIN_GRID, MAX_LENGTH, "a positive number of metres")
+        self._check(
+            "icp_grid_step", lambda v: v == 0 or MIN_GRID <= v <= MAX_LENGTH, f"0 or {MIN_GRID} to {MAX_LENGTH:g} m"
+        )
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
-        self._check("icp_tolerance", lambda v: 0 <= v < math.inf, "zero or a positive number")
-        self._check("icp_fallback_rmse", _positive, "a positive number")
+        self._between("icp_tolerance", 0.0, 1.0, "zero or a positive number (above 1 ICP stops at once)")
+        self._between("icp_fallback_rmse", MIN_RMSE, MAX_LENGTH, "a positive number of metres")
         self._one_of("mode", MODES)
-        self._check("tracking_max_jump_m", _positive, "a positive number")
-        self._check("tracking_max_jump_deg", _positive, "a positive number")
+        self._between("tracking_max_jump_m", 0.0, MAX_LENGTH, "zero or a positive number of metres")
+        self._between("tracking_max_jump_deg", 0.0, 180.0, "zero or a positive number of degrees")
         self._check("tracking_min_overlap", lambda v: 0 <= v <= 1, "a share in [0, 1]")
 
 
 @dataclass(frozen=True)
-class MapConfig(_Table):
+class MapConfig(BoundedTable):
     """How registered scans are merged into submaps and the map (notebooks 4 and 7)."""
 
     TABLE: ClassVar[str] = "map"
@@ -230,12 +218,13 @@ class MapConfig(_Table):
     n_scans_per_submap: int = _param(3, "accepted scans per submap", "nScansPerSubmap")
 
     def __post_init__(self):
-        self._check("align_grid_step", _positive, "a positive number")
+        self._between("align_grid_step", MIN_GRID, MAX_LENGTH, "a positive number of metres")
         self._check("n_scans_per_submap", lambda v: v >= 1, "an integer of at least 1")
+        self._within("n_scans_per_submap", 1, MAX_SCANS)
 
 
 @dataclass(frozen=True)
-class LoopClosureConfig(_Table):
+class LoopClosureConfig(BoundedTable):
     """Which old submaps a scan is compared with, and when a match is a loop (notebook 5)."""
 
     TABLE: ClassVar[str] = "loop_closure"
@@ -259,10 +248,13 @@ class LoopClosureConfig(_Table):
     )
 
     def __post_init__(self):
-        for name in ("loop_closure_search_radius", "loop_closure_threshold", "rmse_threshold"):
-            self._check(name, _positive, "a positive number")
-        self._check("sub_map_thresh", lambda v: v >= 0, "zero or a positive integer")
-        self._check("loop_search_growth", lambda v: math.isfinite(v) and v >= 0, "zero or a positive fraction")
+        self._between("loop_closure_search_radius", 0.0, MAX_RADIUS, "zero (no loops) or a positive number of metres")
+        for name in ("loop_closure_threshold", "rmse_threshold"):
+            self._between(name, MIN_RMSE, MAX_LENGTH, "a positive number of metres")
+        self._check("sub_map_thresh", lambda v: v >= 0, "zero or a positive integer")  # a run needs 1: Config
+        self._within("sub_map_thresh", 0, MAX_SCANS)
+        # A place is never farther than the path flown to it: at growth 1 every old submap is already in reach.
+        self._between("loop_search_growth", 0.0, 1.0, "zero or a positive fraction")
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
@@ -270,7 +262,7 @@ class LoopClosureConfig(_Table):
 
 
 @dataclass(frozen=True)
-class PoseGraphConfig(_Table):
+class PoseGraphConfig(BoundedTable):
     """The pose graph's extra edges, weights and robust kernel (notebook 6).
 
     With the reference's identity weights a rotation of 0.1 rad costs as
@@ -296,8 +288,8 @@ class PoseGraphConfig(_Table):
         self._within("edges_back", 1, MAX_EDGES_BACK)
         self._within("edges_back_icp_max_iterations", 1, MAX_ITERATIONS)
         self._one_of("graph_weights", GRAPH_WEIGHTS)
-        self._check("edge_sigma_m", _positive, "a positive number")
-        self._check("edge_sigma_deg", _positive, "a positive number")
+        self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
+        self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
         self._one_of("loop_kernel", LOOP_KERNELS)
 
     @property
@@ -316,6 +308,16 @@ class Config:
     map: MapConfig = field(default_factory=MapConfig)
     loop_closure: LoopClosureConfig = field(default_factory=LoopClosureConfig)
     pose_graph: PoseGraphConfig = field(default_factory=PoseGraphConfig)
+
+    def __post_init__(self):
+        # A table alone may say 0 (find_loop_candidates then searches the submap it is given as current,
+        # as its unit tests do); a run may not: the newest submap holds the scan that queries, and the scan
+        # would close a loop with itself.
+        if self.loop_closure.sub_map_thresh < 1:
+            raise SlamError(
+                f"[loop_closure] sub_map_thresh must be at least 1 for a run, got {self.loop_closure.sub_map_thresh}: "
+                "the newest submap holds the scan that looks for a loop"
+            )
 
     @classmethod
     def reference(cls) -> Config:

@@ -18,7 +18,7 @@ from scipy.spatial import cKDTree
 
 from .geometry import check_points, relative_pose_error
 from .health import assess
-from .metrics import ErrorStats, ate, rpe
+from .metrics import ErrorStats, ate, json_safe, rpe
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +60,9 @@ def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
     """The figures of a run, units in the names: counts, ATE and RPE against
     ``dataset.poses`` at the nodes, the graph error, the runtimes and, if
     given, the map error (:func:`map_errors`). ``trusted`` and ``health``
-    come from the run alone (:func:`helpers.health.assess`)."""
+    come from the run alone (:func:`helpers.health.assess`); a figure that is
+    not a finite number is None and makes the run untrusted
+    (:func:`helpers.metrics.json_safe`)."""
     health = assess(result)
     poses_gt = dataset.poses[result.indices]
     odometry, optimized = ate(result.poses_odometry, poses_gt), ate(result.poses_optimized, poses_gt)
@@ -95,7 +97,7 @@ def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
     if map_error is not None:
         metrics |= {"map_error_mean_m": map_error.mean, "map_error_median_m": map_error.median}
         metrics["map_error_p95_m"] = map_error.p95
-    return metrics
+    return json_safe(metrics)
 
 
 @dataclass(frozen=True)
@@ -155,6 +157,9 @@ def format_table(rows, digits: int = 3) -> str:
     width = max(len(name) for name, _, _ in rows)
     lines = []
     for name, value, unit in rows:
-        shown = f"{value:d}" if isinstance(value, (int, np.integer)) else f"{value:.{digits}g}"
+        if value is None:  # a short flight's 10-step RPE, or a figure that was not a finite number
+            shown = "n/a"
+        else:
+            shown = f"{value:d}" if isinstance(value, (int, np.integer)) else f"{value:.{digits}g}"
         lines.append(f"{name:<{width}}  {shown:>8}  {unit}")
     return "\n".join(lines)

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .config import Config
+from .errors import SlamError
 
 # The reference's flight, measured on the shipped default (the values were tuned for it).
 REFERENCE_HEIGHT = 603.0  # m above the ground, median over the waypoints
@@ -63,6 +64,11 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
     """``config`` with its geometry-dependent values fitted to ``flight``, and
     one line per value saying what it became and why. ``keep``: the
     ``(table, key)`` pairs the user set, left as they are."""
+    if not flight.height > 0:  # the lengths scale with the height, and the strip would be empty
+        raise SlamError(
+            f"the flight is {flight.height:.1f} m above the ground (median over the waypoints): parameters can be "
+            "fitted only to a flight above the map (--reference-values keeps the configured ones)"
+        )
     k = flight.height / REFERENCE_HEIGHT
     along = flight.spacing / REFERENCE_SPACING  # how much farther apart the waypoints are
     ref_fit, ref_features = REFERENCE.registration, REFERENCE.features

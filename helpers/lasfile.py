@@ -30,6 +30,11 @@ LASZIP_VLR = (b"laszip encoded", 22204)  # user id and record id of the VLR that
 MAX_LAZ_CHUNK, VARIABLE_CHUNKS = 1_000_000, 0xFFFFFFFF  # points per LAZ chunk (laszip writes 50,000), or variable
 LAYERED, LAYERS = 3, {10: 9, 11: 1, 12: 2}  # laszip's layered compressor; layers per item (BYTE14: one a byte)
 MAX_VLR_BYTES = 1 << 26  # real tiles hold kilobytes of VLRs; laspy reads them all into memory
+# Scales and offsets that keep every coordinate a record can hold (offset + scale x a 32-bit integer) finite
+# and its differences exact enough: real tiles use steps of a millimetre to a centimetre and offsets of
+# map coordinates (millions of metres or feet at most).
+SCALE_RANGE = (1e-9, 100.0)  # units per integer step, in absolute value
+MAX_OFFSET = 1e10  # units
 
 
 def check_las_file(path: Path) -> None:
@@ -66,10 +71,11 @@ def check_las_file(path: Path) -> None:
         if not compressed and points_end > size:
             raise bad(f"it is truncated: its {count:,} points need {points_end:,} bytes, the file has {size:,}")
         scales, offsets, bounds = np.array(values[:3]), np.array(values[3:6]), np.array(values[6:]).reshape(3, 2)
-        if not (np.isfinite(scales).all() and scales.all()):
-            raise bad(f"its scale factors {scales.tolist()} must be finite and non-zero")
-        if not np.isfinite(offsets).all():
-            raise bad(f"its offsets {offsets.tolist()} must be finite")
+        low, high = SCALE_RANGE
+        if not all(low <= abs(s) <= high for s in scales):  # NaN fails too
+            raise bad(f"its scale factors {scales.tolist()} must be finite, from {low:g} to {high:g} in absolute value")
+        if not all(abs(o) <= MAX_OFFSET for o in offsets):
+            raise bad(f"its offsets {offsets.tolist()} must be finite and within +-{MAX_OFFSET:g}")
         if not (np.isfinite(bounds).all() and (bounds[:, 1] <= bounds[:, 0]).all()):
             raise bad(f"its bounds (max, min per axis) {bounds.tolist()} must be finite with min <= max")
         vlrs = _read_vlrs(f, header_size, offset, n_vlrs, bad)

@@ -13,6 +13,7 @@ import logging
 import re
 import shutil
 import tarfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -33,6 +34,13 @@ LINEAR_UNITS = {9001: 1.0, 9002: 0.3048, 9003: 1200.0 / 3937.0, 9030: 1852.0, 90
 LAS_CLASSES = {2: GROUND, 3: TREE, 4: TREE, 5: TREE, 6: BUILDING, 9: WATER, 11: ROAD}
 MAX_MAP_CELLS = 50_000_000  # cells of the height field built from a tile: 50 km² at 1 m
 CELL_BYTES = 60  # memory a cell takes while the height field is built (heights, labels, hole filling)
+# What an archive member may unpack to. Real LAZ tiles are tens to hundreds of MB, the same tile as LAS
+# about ten times that: 4 GiB holds a LAS tile of over 100 million points and stops a bomb before it fills
+# a disk. gzip shrinks a LAS tile about twice and a LAZ tile not at all, so a member that expands more
+# than 20 times its archive is made of repeats, not of survey points.
+MAX_TILE_BYTES = 4 << 30
+MAX_ARCHIVE_RATIO = 20
+FREE_SPACE_MARGIN = 256 << 20  # bytes left free on the cache's disk after a tile is unpacked
 
 
 @dataclass(frozen=True)
@@ -69,7 +77,12 @@ def read_map(path: str | Path) -> AerialMap:
         raise SlamError(f"map file not found: {path}")
     name = path.name.lower()
     if name.endswith((".tar.gz", ".tgz")):
-        return read_map(_extract_las(path))
+        tile = _extract_las(path)
+        try:
+            return _read_las(tile)
+        except SlamError:  # a rejected tile is not kept in the cache
+            _forget(tile.parent, tile)
+            raise
     if not name.endswith((".las", ".laz")):
         raise SlamError(f"map must be a .las, .laz or .tar.gz file, got {path.name}")
     return _read_las(path)
@@ -147,29 +160,97 @@ def _unit_name(metres: float) -> str:
 
 
 def _extract_las(archive: Path) -> Path:
-    """Extract the first .las/.laz of a tarball into the cache, once."""
+    """Extract the first .las/.laz of a tarball into the cache, once.
+
+    The member's declared size is checked against :data:`MAX_TILE_BYTES`,
+    :data:`MAX_ARCHIVE_RATIO` and the free space before anything is written,
+    and the bytes are counted again while they stream (a header can lie);
+    whatever a refused or failed extraction wrote is removed."""
     stat = archive.stat()
     key = hashlib.sha256(f"{archive.resolve()}|{stat.st_size}|{stat.st_mtime_ns}".encode()).hexdigest()[:16]
     target_dir = paths.cache_dir() / "maps" / key
-    done = sorted(target_dir.glob("*.la[sz]")) if target_dir.is_dir() else []
+    done = sorted(_tiles_in(target_dir))
     if done:
         return done[0]
+    target = None
     try:
         with tarfile.open(archive, "r:gz") as tar:
-            members = sorted(
-                (m for m in tar.getmembers() if m.isfile() and m.name.lower().endswith((".las", ".laz"))),
-                key=lambda m: m.name,
-            )
+            members = []
+            for m in tar:  # header after header: a size is checked before its data is skipped
+                if m.isfile() and m.name.lower().endswith((".las", ".laz")):
+                    _check_member_size(f"{Path(m.name).name} in {archive.name}", m.size, stat.st_size)
+                    members.append(m)
             if not members:
                 raise SlamError(f"{archive.name} holds no .las or .laz file")
-            member = members[0]
+            member = min(members, key=lambda m: m.name)
+            name = Path(member.name).name
+            _check_free_space(f"{name} in {archive.name}", member.size, target_dir)
             source = tar.extractfile(member)
+            head = source.read(4)
+            if head != b"LASF":
+                raise SlamError(f"{name} in {archive.name} is not a readable LAS/LAZ file: it has no LAS header")
             target_dir.mkdir(parents=True, exist_ok=True)
-            target = target_dir / Path(member.name).name
-            paths.write_atomically(target, lambda out: shutil.copyfileobj(source, out, 1 << 20))
-    except (tarfile.TarError, OSError, EOFError) as exc:
+            target = target_dir / name
+            limit = min(member.size, MAX_TILE_BYTES)
+            paths.write_atomically(target, lambda out: _copy_at_most(head, source, out, limit, name))
+    except (tarfile.TarError, OSError, EOFError, zlib.error) as exc:
+        _forget(target_dir, target)
         raise SlamError(f"{archive.name} is not a readable .tar.gz archive ({exc})") from None
+    except SlamError:
+        _forget(target_dir, target)
+        raise
     return target
+
+
+def _tiles_in(folder: Path) -> list[Path]:
+    """The .las/.laz files (any case) a finished extraction left in ``folder``."""
+    if not folder.is_dir():
+        return []
+    return [p for p in folder.iterdir() if p.suffix.lower() in (".las", ".laz") and not p.name.startswith(".")]
+
+
+def _check_member_size(where: str, size: int, archive_size: int) -> None:
+    """Refuse a member too large for a tile, or too compressed to hold survey points."""
+    if size > MAX_TILE_BYTES:
+        raise SlamError(f"{where} holds {human_size(size)}; the limit is {human_size(MAX_TILE_BYTES)} for a tile")
+    if size > MAX_ARCHIVE_RATIO * archive_size:
+        raise SlamError(
+            f"{where} expands to {human_size(size)} from a {human_size(archive_size)} archive, "
+            f"{size / max(archive_size, 1):.3g} times; the limit is {MAX_ARCHIVE_RATIO} times (tiles compress less)"
+        )
+
+
+def _check_free_space(where: str, size: int, target_dir: Path) -> None:
+    """Refuse a member that would leave less than :data:`FREE_SPACE_MARGIN` free on the cache's disk."""
+    existing = next(p for p in (target_dir, *target_dir.parents) if p.exists())
+    free = shutil.disk_usage(existing).free
+    if size + FREE_SPACE_MARGIN > free:
+        raise SlamError(
+            f"{where} needs {human_size(size)} and {human_size(FREE_SPACE_MARGIN)} to spare, but the cache "
+            f"({paths.cache_dir()}) has {human_size(free)} free: free some space or set ${paths.CACHE_VARIABLE}"
+        )
+
+
+def _copy_at_most(head: bytes, source, out, limit: int, name: str) -> None:
+    """Write ``head`` then the rest of ``source`` into ``out``, refusing it once more than ``limit`` bytes came."""
+    written = len(head)
+    out.write(head)
+    while chunk := source.read(1 << 20):
+        written += len(chunk)
+        if written > limit:
+            raise SlamError(f"{name} unpacks to more than the {human_size(limit)} its archive declares or allows")
+        out.write(chunk)
+
+
+def _forget(folder: Path, tile: Path | None) -> None:
+    """Remove an extracted ``tile`` (if any), then ``folder`` and ``maps/`` above it if that leaves them empty."""
+    if tile is not None:
+        tile.unlink(missing_ok=True)
+    for empty in (folder, folder.parent):
+        try:
+            empty.rmdir()  # only an empty folder goes
+        except OSError:
+            break
 
 
 def height_field_from_points(points: np.ndarray, labels: np.ndarray, cell: float = 1.0, max_gap: float = 3.0):

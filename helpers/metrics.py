@@ -92,3 +92,35 @@ def _check_pair(estimated, ground_truth) -> tuple[np.ndarray, np.ndarray]:
     if len(est) != len(gt):
         raise SlamError(f"the trajectories differ in length: {len(est)} estimated, {len(gt)} ground-truth poses")
     return est, gt
+
+
+def json_safe(figures: dict) -> dict:
+    """A copy of ``figures`` that strict JSON can hold: every NaN or infinite
+    number (a figure nobody can read) becomes None, written as ``null``.
+
+    A run with such a figure is not one to trust: if any was found,
+    ``"trusted"`` becomes False and ``figures["health"]["problems"]`` (when
+    present) names them. Write the result with ``json.dumps(...,
+    allow_nan=False)``, which then never meets a bare ``NaN``.
+    """
+    bad: list[str] = []
+
+    def clean(value, where: str):
+        if isinstance(value, dict):
+            return {key: clean(v, f"{where}.{key}" if where else str(key)) for key, v in value.items()}
+        if isinstance(value, (list, tuple)):
+            return [clean(v, f"{where}[{i}]") for i, v in enumerate(value)]
+        if isinstance(value, (float, np.floating)):
+            if not np.isfinite(value):
+                bad.append(where)
+                return None
+            return float(value)
+        return value
+
+    safe = clean(figures, "")
+    if bad:
+        safe["trusted"] = False
+        health = safe.get("health")
+        if isinstance(health, dict) and isinstance(health.get("problems"), list):
+            health["problems"].append(f"figures that are not finite numbers (written as null): {', '.join(bad)}.")
+    return safe

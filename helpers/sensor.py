@@ -132,6 +132,12 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         origin_and_direction = batch.reshape(-1, 6).take(flat, axis=0)
         hits[used : used + len(t_ok)] = origin_and_direction[:, :3] + t_ok[:, None] * origin_and_direction[:, 3:]
         measured = (t_ok + noise.ravel()[flat])[:, None] * pattern.take(ray_of, axis=0)
+        if not np.isfinite(measured).all():  # the config bounds the noise; this keeps a NaN out of every later stage
+            bad = first_index + first + np.unique(flat[~np.isfinite(measured).all(axis=1)] // k)
+            raise SlamError(
+                f"scans {index_ranges(bad)} came out with NaN or infinite points: "
+                f"[sensor] range_noise = {sensor.range_noise:g} m is too large for float32 ranges"
+            )
         scans += np.split(measured.astype(np.float64), np.cumsum(ok.sum(axis=1))[:-1])
         used += len(t_ok)
         if progress is not None:
