@@ -347,3 +347,28 @@ def test_the_temporary_folder_of_a_killed_writer_goes_at_the_next_write(tmp_path
     with atomic_dir(place / "out", ".m") as work:
         (work / "a.txt").write_text("a")
     assert sorted(p.name for p in place.iterdir()) == sorted([*keep, "out"])
+
+
+# 10: the book's kernels ---------------------------------------------------------------------------------------------
+
+BOOK = """
+import sys
+from pathlib import Path
+from helpers.site import build
+build.NOTEBOOKS = Path(sys.argv[1])
+from helpers.__main__ import main
+sys.exit(main(["site", "--out", sys.argv[2]]))
+"""
+
+
+def test_the_book_runs_its_kernels_quietly_over_unix_sockets(tmp_path, one_notebook):
+    """No "running over TCP without encryption" from the kernel, no "No handler found for comm target
+    'dash'" from nbclient, and no socket file left anywhere."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    out = tmp_path / "html"
+    command = [sys.executable, "-c", BOOK, str(one_notebook), str(out)]
+    done = subprocess.run(command, capture_output=True, text=True, env=env, cwd=tmp_path, timeout=600)
+    assert done.returncode == 0, done.stderr
+    assert "TCP" not in done.stderr and "comm target" not in done.stderr, done.stderr
+    assert "42" in (out / "01_page.html").read_text(encoding="utf-8")
+    assert not list(tmp_path.glob("kernel*")) and not list(one_notebook.glob("kernel*"))
