@@ -67,8 +67,7 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
         raise SlamError(f"output folder {given} holds the current folder: choose another")
     if target.is_dir() and _is_mount_point(target):
         raise SlamError(f"output folder {given} is a mount point, which cannot be replaced: choose a folder inside it")
-    found = _entries(target) if target.is_dir() else set()
-    if found:
+    if target.is_dir() and any(target.iterdir()):
         written = _read_marker(target / marker)
         if written == "old" or (written is None and legacy and (target / legacy).exists()):
             raise SlamError(
@@ -77,7 +76,7 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
             )
         if written is None:
             raise SlamError(f"output folder {given} is not empty and holds no earlier {marker}: choose another")
-        foreign = sorted(found - written - {marker})
+        foreign = sorted(_entries(target) - written - {marker})  # walked only in a folder we marked
         if foreign:
             shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
             raise SlamError(
@@ -127,6 +126,21 @@ def atomic_dir(out_dir: str | Path, marker: str, legacy: str | None = None):
         raise
 
 
+@contextmanager
+def scratch_dir(name: str):
+    """A temporary folder of ours in the system's temporary folder, removed
+    when the block ends; one that a killed process left there goes at the
+    next call (as :func:`atomic_dir`'s do)."""
+    parent = Path(tempfile.gettempdir())
+    with _locked(parent):
+        _remove_stale(parent)
+    folder = _new_folder(parent, name, "partial")
+    try:
+        yield folder
+    finally:
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def _which_file(filename, work: Path | None, target: Path) -> str:
     """The file an OSError names, as the error message shows it: relative to the output folder."""
     if not filename or Path(filename) == target:
@@ -158,7 +172,7 @@ def _new_name(name: str, kind: str) -> str:
 
 def _host() -> str:
     """This machine's name as a temporary folder carries it: a pid means something only on its own host."""
-    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname().split(".")[0]) or "host"
+    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname().split(".")[0])[:20] or "host"  # short paths
 
 
 def _new_folder(parent: Path, name: str, kind: str) -> Path:

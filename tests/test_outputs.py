@@ -349,6 +349,30 @@ def test_the_temporary_folder_of_a_killed_writer_goes_at_the_next_write(tmp_path
     assert sorted(p.name for p in place.iterdir()) == sorted([*keep, "out"])
 
 
+SCRATCH = """
+import time
+from helpers.paths import scratch_dir
+with scratch_dir("helpers-book") as folder:
+    (folder / "page.html").write_text("half")
+    print("writing", flush=True)
+    time.sleep(60)
+"""
+
+
+def test_the_scratch_folder_of_a_killed_book_build_goes_at_the_next_build(tmp_path, monkeypatch):
+    env = {**os.environ, "PYTHONPATH": str(REPO), "TMPDIR": str(tmp_path)}
+    writer = subprocess.Popen([sys.executable, "-c", SCRATCH], env=env, stdout=subprocess.PIPE)
+    assert writer.stdout.readline() == b"writing\n"
+    writer.send_signal(signal.SIGKILL)
+    writer.wait()
+    left = [p.name for p in tmp_path.iterdir() if p.name.startswith(".helpers-book.")]
+    assert len(left) == 1 and f".{writer.pid}." in left[0]
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    with helpers.paths.scratch_dir("helpers-book") as folder:
+        assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".helpers-book.")] == [folder.name]
+    assert not folder.exists()
+
+
 # 10: the book's kernels ---------------------------------------------------------------------------------------------
 
 BOOK = """

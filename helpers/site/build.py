@@ -18,7 +18,6 @@ import logging
 import os
 import re
 import shutil
-import tempfile
 import warnings
 from pathlib import Path
 from unittest import mock
@@ -124,11 +123,11 @@ def solution_paths() -> list[Path]:
 def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
     """Execute (optionally) the notebooks and build the book; returns its index.html."""
     chapters, solutions = notebook_paths(), solution_paths()
-    with paths.atomic_dir(out_dir, MARKER) as work, tempfile.TemporaryDirectory(prefix="helpers-book-") as tmp:
-        source = Path(tmp) / "source"
+    with paths.atomic_dir(out_dir, MARKER) as work, paths.scratch_dir("helpers-book") as tmp:
+        source = tmp / "source"
         source.mkdir()
         (source / SOLUTIONS).mkdir()
-        sockets = Path(tmp) / "kernel"  # the kernels' IPC sockets: kernel-1 ... kernel-5, in the temporary folder
+        sockets = tmp / "k"  # the kernels' IPC sockets k-1 ... k-5 (a Unix socket's path has at most 107 bytes)
         for path in chapters:
             _add_notebook(path, source / path.name, execute, sockets)
         for path in solutions:
@@ -139,7 +138,7 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
-        built = _sphinx(source, Path(tmp) / "build" / "html", Path(tmp) / "build" / "doctrees")
+        built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
         _copy_mathjax(work / "_static" / MATHJAX_DIR)
     return Path(out_dir) / "index.html"
