@@ -5,6 +5,10 @@ The default flight ships inside the package (``helpers/data/``, read through
 (the default run, unpacked map tiles) go to :func:`cache_dir`:
 ``$HELPERS_CACHE`` if set, else ``$XDG_CACHE_HOME/aerial-lidar-slam``
 (``~/.cache/aerial-lidar-slam`` by default). Deleting that folder is always safe.
+
+The commands' output folders are checked and written here too
+(:func:`check_output_place`, :func:`atomic_dir`): all or nothing, and never
+over a folder that holds anything the same command did not write.
 """
 
 from __future__ import annotations
@@ -67,28 +71,37 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
         raise SlamError(f"output folder {given} holds the current folder: choose another")
     if target.is_dir() and _is_mount_point(target):
         raise SlamError(f"output folder {given} is a mount point, which cannot be replaced: choose a folder inside it")
-    if target.is_dir() and any(target.iterdir()):
-        written = _read_marker(target / marker)
-        if written == "old" or (written is None and legacy and (target / legacy).exists()):
-            raise SlamError(
-                f"output folder {given} was written by an older version, which left no list of its files "
-                f"({marker}): delete it by hand if nothing in it is yours, or choose another"
-            )
-        if written is None:
-            raise SlamError(f"output folder {given} is not empty and holds no earlier {marker}: choose another")
-        foreign = sorted(_entries(target) - written - {marker})  # walked only in a folder we marked
-        if foreign:
-            shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-            raise SlamError(
-                f"output folder {given} holds {len(foreign)} file(s) this tool did not write ({shown}): "
-                "move them out or choose another"
-            )
+    try:
+        _check_contents(given, target, marker, legacy)
+    except OSError as exc:
+        raise SlamError(f"output folder {given} cannot be read: {exc.strerror}") from None
     parent = next(a for a in target.parents if a.is_dir())
     try:  # the one sure test of "may I write here": try it (permissions, read-only file systems, root)
         os.rmdir(_new_folder(parent, target.name, "probe"))
     except OSError as exc:
         raise SlamError(f"output folder {given} cannot be written: {parent}: {exc.strerror}") from None
     return target
+
+
+def _check_contents(given: Path, target: Path, marker: str, legacy: str | None) -> None:
+    """Refuses a non-empty ``target`` unless everything in it is listed by its ``marker``."""
+    if not (target.is_dir() and any(target.iterdir())):
+        return
+    written = _read_marker(target / marker)
+    if written == "old" or (written is None and legacy and (target / legacy).exists()):
+        raise SlamError(
+            f"output folder {given} was written by an older version, which left no list of its files "
+            f"({marker}): delete it by hand if nothing in it is yours, or choose another"
+        )
+    if written is None:
+        raise SlamError(f"output folder {given} is not empty and holds no earlier {marker}: choose another")
+    foreign = sorted(_entries(target) - written - {marker})  # walked only in a folder we marked
+    if foreign:
+        shown = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        raise SlamError(
+            f"output folder {given} holds {len(foreign)} file(s) this tool did not write ({shown}): "
+            "move them out or choose another"
+        )
 
 
 @contextmanager
@@ -220,10 +233,14 @@ def _locked(folder: Path):
 def _entries(folder: Path) -> set[str]:
     """Every file, folder and link under ``folder``, as relative POSIX paths."""
     found = set()
-    for root, dirs, files in os.walk(folder):
+    for root, dirs, files in os.walk(folder, onerror=_raise):  # a folder we cannot read is not skipped
         here = Path(root).relative_to(folder)
         found.update((here / name).as_posix() for name in dirs + files)
     return found
+
+
+def _raise(exc: OSError):
+    raise exc
 
 
 def _write_marker(folder: Path, marker: str) -> None:
