@@ -1,7 +1,8 @@
 """Command line: ``python -m helpers dataset|run|site ...`` (installed: ``aerial-lidar-slam``).
 
 Errors in the input end in one line on stderr and exit code 2, never a
-traceback, and never a half-written output folder.
+traceback, and never a half-written output folder. The output folder is
+checked before any work starts (:func:`helpers.paths.check_output_place`).
 """
 
 from __future__ import annotations
@@ -53,6 +54,10 @@ def main(argv=None) -> int:
     except SlamError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # the last line of defence: the stages turn the ones they expect into SlamError
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print("error: interrupted", file=sys.stderr)
         return 130
@@ -67,8 +72,10 @@ def _map_arguments(parser: argparse.ArgumentParser) -> None:
 
 def _dataset(args) -> int:
     from .configfile import load_config
-    from .dataset import create_dataset, write_dataset
+    from .dataset import LEGACY_MARKER, MARKER, create_dataset, write_dataset
+    from .paths import check_output_place
 
+    check_output_place(args.out, MARKER, LEGACY_MARKER)
     config = load_config(args.config)
     start = time.perf_counter()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=sys.stderr.isatty())
@@ -87,9 +94,11 @@ def _run(args) -> int:
     from .evaluation import map_errors, run_metrics
     from .fitting import fit_to_flight, flight_of
     from .health import assess
-    from .output import write_run
+    from .output import LEGACY_MARKER, MARKER, write_run
+    from .paths import check_output_place
     from .pipeline import run_slam
 
+    check_output_place(args.out, MARKER, LEGACY_MARKER)
     config = load_config(args.config)
     start = time.perf_counter()
     interactive = sys.stderr.isatty()

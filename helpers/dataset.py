@@ -27,6 +27,8 @@ from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
 log = logging.getLogger(__name__)
 
 DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"  # the default flight, shipped in the package (.mat beside)
+MARKER = ".helpers-dataset"  # lists what a dataset holds: the next may replace the folder while it holds only that
+LEGACY_MARKER = "poses_gt.txt"  # what marked a dataset's folder before: such a folder is left to the user
 MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the reference's 1 m voxels)
 
 
@@ -190,8 +192,10 @@ def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, senso
 def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False) -> Path:
     """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM)
     and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
-    written in a temporary folder beside it that replaces it at the end."""
-    with paths.atomic_dir(out_dir, "poses_gt.txt") as work:
+    written in a temporary folder beside it that replaces it at the end. An
+    existing ``out_dir`` is replaced only if it is empty or an earlier
+    dataset (:func:`helpers.paths.atomic_dir`)."""
+    with paths.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
         (work / "scans").mkdir()
         bar = progress_bar(len(dataset), "writing scans", enabled=progress)
         for index, scan in enumerate(dataset.scans):

@@ -14,15 +14,19 @@ from .pipeline import SlamResult
 from .plyio import write_ply
 from .trajectory import write_tum
 
+MARKER = ".helpers-run"  # lists what a run wrote: the next run may replace the folder while it holds only that
+LEGACY_MARKER = "metrics.json"  # what marked a run's folder before: such a folder is left to the user
+
 
 def write_run(result: SlamResult, out_dir, metrics: dict, poses_gt: np.ndarray) -> Path:
     """Write ``metrics.json`` (``metrics``, from :func:`helpers.evaluation.run_metrics`,
     and the config), the TUM trajectories of the ground truth (``poses_gt``,
     (K, 4, 4), one per node), the odometry and the optimised poses (one line
     per accepted scan, its dataset index as the stamp), ``map.ply`` and the
-    ``config.toml`` used, all or nothing."""
+    ``config.toml`` used, all or nothing, into a folder that is new, empty
+    or an earlier run's (:func:`helpers.paths.atomic_dir`)."""
     metrics = {**metrics, "config": config_to_dict(result.config)}
-    with paths.atomic_dir(out_dir, "metrics.json") as work:
+    with paths.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
         (work / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
         for name, poses in (
             ("gt", poses_gt),

@@ -375,10 +375,19 @@ def test_the_site_fills_an_empty_folder_and_replaces_an_earlier_site(tmp_path, o
     assert (out / "01_page.html").is_file() and (out / site_module.MARKER).is_file()
     assert "01_page.html" in _parse(out / "index.html").main
     assert "Appendix" not in (out / "index.html").read_text(encoding="utf-8")  # no solutions, no appendix
-    (out / "stale.html").write_text("from an older build")
+    import nbformat.v4
+
+    gone = nbformat.v4.new_notebook(cells=[nbformat.v4.new_markdown_cell("# A page the next build drops")])
+    nbformat.write(gone, one_notebook / "02_gone.ipynb")
+    assert _site(out)[0] == 0 and (out / "02_gone.html").is_file()
+    (one_notebook / "02_gone.ipynb").unlink()
     assert _site(out)[0] == 0
-    assert not (out / "stale.html").exists() and (out / "01_page.html").is_file()
+    assert not (out / "02_gone.html").exists() and (out / "01_page.html").is_file()  # a stale page goes
     assert [p.name for p in out.parent.iterdir()] == ["html"]  # no temporary folders, nothing of myst-nb's
+    (out / "notes.html").write_text("the user's own page")  # but a page the book did not write stays
+    code, err = _site(out)
+    assert code == 2 and "holds 1 file(s) this tool did not write (notes.html)" in err
+    assert (out / "notes.html").read_text() == "the user's own page" and (out / "01_page.html").is_file()
 
 
 def test_the_solutions_are_the_books_appendix(tmp_path, one_notebook):

@@ -18,7 +18,6 @@ import logging
 import os
 import re
 import shutil
-import tempfile
 import warnings
 from pathlib import Path
 from unittest import mock
@@ -36,7 +35,7 @@ TIMEOUT_S = 1800  # per notebook
 TITLE = "Aerial lidar SLAM, step by step"
 MATHJAX_DIR = "mathjax"  # the book's copy of MathJax 2.7, in its _static folder
 MATHJAX_URL = f"{MATHJAX_DIR}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"  # the one full config it ships
-MARKER = ".helpers-site"  # the file that marks a folder as a site this tool wrote (and may replace)
+MARKER = ".helpers-site"  # lists what a build wrote: the next one may replace the folder while it holds only that
 
 # What each page teaches, one line on the landing page (by the notebook's number; a notebook not listed
 # here gets the first sentence of its introduction).
@@ -124,41 +123,57 @@ def solution_paths() -> list[Path]:
 def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
     """Execute (optionally) the notebooks and build the book; returns its index.html."""
     chapters, solutions = notebook_paths(), solution_paths()
-    with paths.atomic_dir(out_dir, MARKER) as work, tempfile.TemporaryDirectory(prefix="helpers-book-") as tmp:
-        source = Path(tmp) / "source"
+    with paths.atomic_dir(out_dir, MARKER) as work, paths.scratch_dir("helpers-book") as tmp:
+        source = tmp / "source"
         source.mkdir()
         (source / SOLUTIONS).mkdir()
+        sockets = tmp / "k"  # the kernels' IPC sockets k-1 ... k-5 (a Unix socket's path has at most 107 bytes)
         for path in chapters:
-            _add_notebook(path, source / path.name, execute)
+            _add_notebook(path, source / path.name, execute, sockets)
         for path in solutions:
-            _add_notebook(path, source / SOLUTIONS / path.name, execute)
+            _add_notebook(path, source / SOLUTIONS / path.name, execute, sockets)
         if (NOTEBOOKS / FIGURES).is_dir():  # pictures the notebooks' text may show, and the landing page's
             shutil.copytree(NOTEBOOKS / FIGURES, source / FIGURES, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
         picture = (source / RESULT_PICTURE).is_file()
         (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
-        built = _sphinx(source, Path(tmp) / "build" / "html", Path(tmp) / "build" / "doctrees")
+        built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
         _copy_mathjax(work / "_static" / MATHJAX_DIR)
-        (work / MARKER).write_text("Written by python -m helpers site: the next build replaces this folder.\n")
     return Path(out_dir) / "index.html"
 
 
-def _add_notebook(path: Path, target: Path, execute: bool) -> None:
+def _add_notebook(path: Path, target: Path, execute: bool, sockets: Path) -> None:
     if not execute:
         shutil.copyfile(path, target)
         return
     import nbformat
     from nbclient import NotebookClient
+    from traitlets.config import Config
 
     notebook = nbformat.read(path, as_version=4)
     log.info("executing %s", path.name)
+    # The kernel talks to us over Unix sockets (files named after ``sockets``), not TCP on localhost: no port
+    # another user of the machine could reach, and no warning from the kernel that TCP is unencrypted.
+    ipc = Config({"KernelManager": {"transport": "ipc", "ip": str(sockets)}})
     # Its kernel draws 3-D views as pictures: a page on disk has no kernel to talk to.
     with mock.patch.dict(os.environ, KERNEL_ENVIRONMENT):
         where = {"metadata": {"path": str(path.parent)}}
-        NotebookClient(notebook, timeout=TIMEOUT_S, resources=where).execute()
+        NotebookClient(notebook, timeout=TIMEOUT_S, resources=where, config=ipc, log=KERNEL_LOG).execute()
     nbformat.write(notebook, target)
+
+
+class _DashComm(logging.Filter):
+    """Drops nbclient's "No handler found for comm target 'dash'": importing Open3D imports Dash, which
+    opens a channel to a Jupyter front end that a book being built does not have, and needs none of."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "No handler found for comm target 'dash'" not in record.getMessage()
+
+
+KERNEL_LOG = logging.getLogger(f"{__name__}.kernel")  # what nbclient says while it executes a notebook
+KERNEL_LOG.addFilter(_DashComm())
 
 
 def _conf() -> str:
