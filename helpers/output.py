@@ -27,7 +27,7 @@ def write_run(result: SlamResult, out_dir, metrics: dict, poses_gt: np.ndarray) 
     or an earlier run's (:func:`helpers.paths.atomic_dir`)."""
     metrics = {**metrics, "config": config_to_dict(result.config)}
     with paths.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
-        (work / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+        (work / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
         for name, poses in (
             ("gt", poses_gt),
             ("odometry", result.poses_odometry),

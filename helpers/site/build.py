@@ -40,7 +40,10 @@ MARKER = ".helpers-site"  # lists what a build wrote: the next one may replace t
 # What each page teaches, one line on the landing page (by the notebook's number; a notebook not listed
 # here gets the first sentence of its introduction).
 SUMMARIES = {
-    "01": "the map, the flight and the lidar's fan of rays; one scan cast by hand with Open3D; the footprint",
+    "01": (
+        "the two input files the reference starts from; the map, the flight and the lidar's fan of rays; "
+        "one scan cast by hand with Open3D; the footprint"
+    ),
     "02": "what each parameter controls, a picture each, and which defaults are the reference's and which are ours",
     "03": "one pair of scans through Open3D's FPFH, matching, Kabsch, MSAC and ICP; odometry and its drift",
     "04": "consecutive scans merged into submaps as they arrive, and which submaps a loop query may search",
