@@ -63,10 +63,8 @@ class Step:
         x, y, z = self.T_map_sensor[:3, 3]
         loop = f"loop {self.loop.i}-{self.loop.j} ({self.loop.surface_rmse:.2f} m)" if self.loop else "no loop"
         fallback = ", fell back" if self.fallback else ""
-        return (
-            f"Step(scan {self.index} -> node {self.node} at ({x:.1f}, {y:.1f}, {z:.1f}) m{fallback}, "
-            f"{len(self.edges_back)} edges back, {loop})"
-        )
+        back = f"{len(self.edges_back)} edge{'' if len(self.edges_back) == 1 else 's'} back"
+        return f"Step(scan {self.index} -> node {self.node} at ({x:.1f}, {y:.1f}, {z:.1f}) m{fallback}, {back}, {loop})"
 
 
 @dataclass
