@@ -114,28 +114,29 @@ class PoseGraph:
         self.factors.append(factor)
         return factor
 
-    def add_odometry(self, i: int, j: int, relative_pose: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> None:
-        """An odometry edge ``pose_j = pose_i @ relative_pose``, noise ``sigmas`` (x y z rx ry rz)."""
-        self._between(BetweenFactor, i, j, relative_pose, information_from_sigmas(sigmas), "odometry")
+    def add_odometry(self, i: int, j: int, T_i_j: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> None:
+        """An odometry edge ``pose_j = pose_i @ T_i_j``, noise ``sigmas`` (x y z rx ry rz)."""
+        self._between(BetweenFactor, i, j, T_i_j, information_from_sigmas(sigmas), "odometry")
 
-    def append(self, relative_pose: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> int:
-        """Chain a new node after the last one (like ``addRelativePose`` without ids); returns its id."""
+    def append(self, T_last_new: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> int:
+        """Chain a new node after the last one, ``T_last_new`` from it (like ``addRelativePose`` without ids);
+        returns its id."""
         if self.num_nodes == 0:
             raise SlamError("the pose graph is empty: add the first node with add_node() before chaining")
-        step = check_pose(relative_pose, "the odometry step")
+        step = check_pose(T_last_new, "the odometry step")
         j = self.add_node(self._poses[-1] @ step)
         self.add_odometry(j - 1, j, step, sigmas)
         return j
 
-    def add_loop(self, i: int, j: int, relative_pose: np.ndarray, information=None) -> int:
-        """A loop edge ``pose_j = pose_i @ relative_pose``; returns its index among loop edges.
+    def add_loop(self, i: int, j: int, T_i_j: np.ndarray, information=None) -> int:
+        """A loop edge ``pose_j = pose_i @ T_i_j``; returns its index among loop edges.
 
         ``information`` is a symmetric positive-definite 6 x 6 matrix in the
         reference's order x y z rx ry rz (identity when not given, as in the
         reference); it is permuted to GTSAM's rotation-first order inside.
         """
         info = LOOP_INFORMATION if information is None else check_information(information)
-        self._between(LoopFactor, i, j, relative_pose, info, "loop")
+        self._between(LoopFactor, i, j, T_i_j, info, "loop")
         return len(self._loops()) - 1
 
     def loop_pairs(self) -> list[tuple[int, int]]:
@@ -207,13 +208,13 @@ class PoseGraph:
     def _loops(self) -> list[LoopFactor]:
         return [f for f in self.factors if isinstance(f, LoopFactor)]
 
-    def _between(self, kind, i, j, relative_pose, information, name: str) -> None:
+    def _between(self, kind, i, j, T_i_j, information, name: str) -> None:
         for k in (i, j):
             if not isinstance(k, (int, np.integer)) or not 0 <= k < self.num_nodes:
                 raise SlamError(f"{name} edge ({i}, {j}): node {k} does not exist (the graph has {self.num_nodes})")
         if i == j:
             raise SlamError(f"{name} edge ({i}, {j}) joins a node to itself")
-        self.factors.append(kind(int(i), int(j), check_pose(relative_pose, f"the {name} edge ({i}, {j})"), information))
+        self.factors.append(kind(int(i), int(j), check_pose(T_i_j, f"the {name} edge ({i}, {j})"), information))
 
     def _check_connected(self) -> None:
         edges = np.array([f.nodes for f in self.factors if len(f.nodes) == 2], dtype=int).reshape(-1, 2)
