@@ -54,7 +54,7 @@ class LoopCandidates(NamedTuple):
     n_eligible: int = 0  # submaps 0 .. n_eligible - 1 were old enough to be searched
     radius: np.ndarray = np.zeros(0)  # (S,) search radius (m) around each of the S submaps given, grown with the flight
     tried_ids: np.ndarray = np.zeros(0, dtype=int)  # (A,) the submaps registered by ICP, nearest first
-    tried_rmse: np.ndarray = np.zeros(0)  # (A,) their surface RMSE, m
+    tried: np.ndarray = np.zeros(0)  # (A,) their surface RMSE, m (the names of LoopQuery)
 
 
 @dataclass(frozen=True)
@@ -139,7 +139,7 @@ class LoopCloser:
             n_eligible=candidates.n_eligible,
             radius=candidates.radius,
             tried_ids=candidates.tried_ids,
-            tried=candidates.tried_rmse,
+            tried=candidates.tried,
             submap_ids=candidates.ids,
             scores=candidates.scores,
             best_scan_rmse=best,
@@ -224,7 +224,7 @@ def find_loop_candidates(
             T_fixed_moving=scan_pose,
             max_iterations=settings.icp_max_iterations,
         )
-        log.debug("submap %d at %.1f m: ICP RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)
         tried.append(rmse)
         if rmse < settings.loop_closure_threshold:
             found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
@@ -239,7 +239,7 @@ def find_loop_candidates(
         n_eligible=len(eligible),
         radius=radius,
         tried_ids=near[:max_attempts].astype(int),
-        tried_rmse=np.array(tried, dtype=float),
+        tried=np.array(tried, dtype=float),
     )
 
 

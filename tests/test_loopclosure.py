@@ -96,7 +96,7 @@ def test_at_most_three_attempts_nearest_first():
     found = search([[0, d, 0] for d in distances], icp)
     assert icp.ids == [3, 1, 5]  # 1 m, 2 m, 3 m
     np.testing.assert_array_equal(found.tried_ids, [3, 1, 5])  # the search records what it tried, in order
-    assert len(found.tried_rmse) == 3 and found.n_eligible == len(distances)
+    assert len(found.tried) == 3 and found.n_eligible == len(distances)
 
 
 def test_at_most_three_returned_sorted_by_rmse_below_threshold():
