@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .factors import Edge
 from .geometry import check_points, relative_pose_error
 from .health import assess
 from .metrics import ErrorStats, ate, json_safe, rpe
@@ -27,19 +28,31 @@ FALSE_LOOP_DEG = 2.0  # ... or turned by more than this
 
 
 @dataclass(frozen=True)
-class GradedLoop:
+class GradedLoop(Edge):
     """A loop edge ``pose_j = pose_i @ relative`` and how far it is from the truth."""
 
-    i: int  # the older node
-    j: int  # the current node
-    relative: np.ndarray  # (4, 4)
-    rmse: float  # m, ICP RMSE of the scan-to-scan match
-    error_m: float  # translation error of ``relative`` against the ground truth
-    error_deg: float  # rotation error, degrees
+    error_m: float = float("nan")  # translation error of ``relative`` against the ground truth
+    error_deg: float = float("nan")  # rotation error, degrees
 
     @property
     def false(self) -> bool:
-        return self.error_m > FALSE_LOOP_M or self.error_deg > FALSE_LOOP_DEG
+        return is_false_loop(self.error_m, self.error_deg)
+
+
+def is_false_loop(error_m: float, error_deg: float) -> bool:
+    """The one rule of a false loop edge: off by more than :data:`FALSE_LOOP_M` or :data:`FALSE_LOOP_DEG`."""
+    return error_m > FALSE_LOOP_M or error_deg > FALSE_LOOP_DEG
+
+
+def true_relative_pose(poses_gt: np.ndarray, i: int, j: int) -> np.ndarray:
+    """The true ``T_i_j`` between nodes ``i`` and ``j`` (``poses_gt``: the nodes' true poses)."""
+    return np.linalg.inv(poses_gt[i]) @ poses_gt[j]
+
+
+def loop_error(poses_gt: np.ndarray, edge) -> tuple[float, float]:
+    """How far an edge (``i``, ``j``, ``relative``) is from the truth: translation (m), rotation (deg)."""
+    error_m, error_deg = relative_pose_error(true_relative_pose(poses_gt, edge.i, edge.j), edge.relative)
+    return float(error_m), float(error_deg)
 
 
 def grade_loops(dataset, result) -> list[GradedLoop]:
@@ -48,9 +61,8 @@ def grade_loops(dataset, result) -> list[GradedLoop]:
     poses_gt = dataset.poses[result.indices]
     graded = []
     for loop in result.loops:
-        truth = np.linalg.inv(poses_gt[loop.i]) @ poses_gt[loop.j]
-        error_m, error_deg = relative_pose_error(truth, loop.relative)
-        graded.append(GradedLoop(loop.i, loop.j, loop.relative, loop.rmse, float(error_m), float(error_deg)))
+        error_m, error_deg = loop_error(poses_gt, loop)
+        graded.append(GradedLoop(loop.i, loop.j, loop.relative, loop.surface_rmse, error_m, error_deg))
         if graded[-1].false:
             log.warning("false loop %d -> %d: %.2f m, %.2f deg off", loop.i, loop.j, error_m, error_deg)
     return graded

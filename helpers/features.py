@@ -22,7 +22,7 @@ from .geometry import check_points
 HISTOGRAMS = 3  # FPFH is three histograms ...
 BINS = 11  # ... of 11 bins each
 UP = np.array([0.0, 0.0, 1.0])  # normals are turned towards the sensor, which looks down from +z
-MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache; measured best)
+MATCH_BLOCK_ROWS = 128  # query rows per block of the exhaustive matcher (keeps the block in cache)
 REACH_MARGIN = 1e-3  # descriptor-distance slack against float32 rounding in the exhaustive search
 MAX_DESCRIPTOR_DISTANCE = np.sqrt(2.0)  # largest distance between unit descriptors with no negative entry
 
@@ -101,15 +101,13 @@ def keypoints(normals, share: float) -> np.ndarray:
 
     Why tilted: seen from 700 m up, flat ground and flat roofs have nearly
     the same descriptor everywhere, so their matches are mostly wrong or
-    dropped by the ratio test. Matching only the more tilted half of each
-    scan (roof slopes, walls, tree crowns), measured on 55 pairs of the
-    default flight: a third of the matches, more of them right (36 % within
-    1 m of the true partner against 19 %), a quarter of the matching time
-    (it compares every moving descriptor with every fixed one) and the same
-    odometry after ICP (ATE 1.02 m both); but the robust fit, with fewer
-    inliers, lands a little farther from the truth (median point error
-    0.36 m against 0.35 m, up to 0.49 m against 0.29 m on one test pair), so
-    the reference's "every point" stays the default.
+    dropped by the ratio test. Matching only the more tilted part of each
+    scan (roof slopes, walls, tree crowns) gives fewer matches, more of them
+    right, in a fraction of the matching time (it compares every moving
+    descriptor with every fixed one) and the same odometry after ICP; but
+    the robust fit, with fewer inliers, lands a little farther from the
+    truth, so the reference's "every point" stays the default (the README's
+    measured figures).
     """
     normals = np.asarray(normals, dtype=np.float64)
     if not 0 < share <= 1:
@@ -191,11 +189,11 @@ def _two_nearest(queries: np.ndarray, references: np.ndarray, reach: float | Non
     is one reference. ``reach`` is widened by ``REACH_MARGIN`` against
     float32 rounding.
 
-    Why exhaustive (measured on 5.8k FPFH descriptors a scan): a k-d tree in
-    33 dimensions (scipy, both cores, even bounded by the match radius) is
-    slower than this product, and a tree on the first 4-12 principal
-    components still leaves 300-480 candidates per query within the match
-    radius: descriptors of smooth ground crowd together.
+    Why exhaustive: on a scan's worth of FPFH descriptors a k-d tree in 33
+    dimensions (even bounded by the match radius) is slower than this
+    product, and a tree on the first few principal components still leaves
+    hundreds of candidates per query within the match radius: descriptors
+    of smooth ground crowd together.
     """
     q = np.empty((len(queries), queries.shape[1] + 1), dtype=np.float32)
     q[:, :-1] = queries

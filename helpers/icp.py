@@ -5,8 +5,10 @@ Two back ends run the same three metrics: small_gicp (the default; parallel
 GICP and k-d trees made for this job) and Open3D (the ICP the tutorial
 started with, kept reachable with ``[registration] icp_backend = "open3d"``).
 
-A transform ``T`` (4 x 4) maps *moving* (source) points onto *fixed* (target)
-points: ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``.
+Clouds are *moving* and *fixed* here, and a transform is named by its
+frames (the package's rule): ``T_fixed_moving`` (4 x 4) carries moving
+points into the fixed cloud's frame, ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``
+(small_gicp calls the two ``source`` and ``target``: ``T_target_source``).
 """
 
 from __future__ import annotations
@@ -131,14 +133,15 @@ def gicp_covariances(normals: np.ndarray, epsilon: float = GICP_EPSILON) -> np.n
 def refine_icp(
     moving,
     fixed,
-    init,
+    T_fixed_moving,
+    *,
     metric: str,
     inlier_distance: float,
     max_iterations: int,
     tolerance: float,
     backend: str,
 ) -> tuple[np.ndarray, float]:
-    """Refine ``init`` (4 x 4, moving -> fixed) by ICP; returns ``(T, rmse)``.
+    """Refine the guess ``T_fixed_moving`` (4 x 4) by ICP; returns the refined ``(T_fixed_moving, rmse)``.
 
     ``moving`` and ``fixed`` are (N, 3) arrays or :class:`IcpCloud` made by
     :func:`icp_cloud` for the same metric and back end (then nothing per
@@ -151,29 +154,29 @@ def refine_icp(
     with small_gicp, the transform moves no point by more than about
     ``tolerance`` metres (its translation by less than ``tolerance``, its
     rotation by less than ``tolerance`` over the farthest point's range).
-    The pipeline takes all five from ``[registration]``.
+    :class:`helpers.icp_service.IcpService` takes all but the cap from ``[registration]``.
 
     ``rmse`` (m) is always the same measure, whatever the metric and back
     end: the root mean square distance from each moved moving point to its
     nearest fixed point, over the pairs closer than ``inlier_distance``;
     ``inf`` if none is.
     """
-    init = np.asarray(init, dtype=np.float64)
+    init = np.asarray(T_fixed_moving, dtype=np.float64)
     if metric not in METRICS:
         raise SlamError(f"unknown ICP metric {metric!r}: use one of {', '.join(METRICS)}")
     if init.shape != (4, 4) or not np.isfinite(init).all():
         raise SlamError(f"the initial transform must be a finite 4 x 4 matrix, got shape {init.shape}")
-    source = _ready(moving, "the moving cloud", metric, backend)
-    target = _ready(fixed, "the fixed cloud", metric, backend)
+    moving = _ready(moving, "the moving cloud", metric, backend)
+    fixed = _ready(fixed, "the fixed cloud", metric, backend)
     if not (np.isfinite(inlier_distance) and inlier_distance > 0):
         raise SlamError(f"the ICP inlier distance must be a positive number of metres, got {inlier_distance!r}")
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise SlamError(f"the ICP tolerance must be zero or a positive number, got {tolerance!r}")
     if backend == "small_gicp":
-        return _small_gicp(source, target, init, metric, inlier_distance, max_iterations, tolerance)
+        return _small_gicp(moving, fixed, init, metric, inlier_distance, max_iterations, tolerance)
 
     reg = o3d.pipelines.registration
-    source, target = source.cloud, target.cloud
+    source, target = moving.cloud, fixed.cloud  # Open3D's names
     criteria = reg.ICPConvergenceCriteria(tolerance, tolerance, int(max_iterations))
     if metric == "plane-to-plane":
         estimation = reg.TransformationEstimationForGeneralizedICP(GICP_EPSILON)
@@ -190,22 +193,23 @@ def refine_icp(
     return transform, rmse
 
 
-def _small_gicp(source: IcpCloud, target: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance):
-    """small_gicp's ICP, then the RMSE of :func:`refine_icp` from the target's k-d tree."""
+def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance):
+    """small_gicp's ICP (its target is our fixed cloud, its source the moving one),
+    then the RMSE of :func:`refine_icp` from the fixed cloud's k-d tree."""
     result = small_gicp.align(
-        target.cloud,
-        source.cloud,
-        target.tree,
+        fixed.cloud,
+        moving.cloud,
+        fixed.tree,
         init_T_target_source=init,
         registration_type=SMALL_GICP_TYPES[metric],
         max_correspondence_distance=inlier_distance,
         num_threads=threads(),
         max_iterations=int(max_iterations),
-        rotation_epsilon=tolerance / max(source.reach, 1.0),
+        rotation_epsilon=tolerance / max(moving.reach, 1.0),
         translation_epsilon=tolerance,
     )
     transform = np.array(result.T_target_source)
-    squared, _ = target.nearest(source.points @ transform[:3, :3].T + transform[:3, 3])
+    squared, _ = fixed.nearest(moving.points @ transform[:3, :3].T + transform[:3, 3])
     paired = squared < inlier_distance**2
     rmse = float(np.sqrt(squared[paired].mean())) if paired.any() else float("inf")
     return transform, rmse
@@ -220,43 +224,41 @@ def _ready(cloud, what: str, metric: str, backend: str) -> IcpCloud:
     return icp_cloud(check_points(cloud, what, minimum=SAMPLE_SIZE), metric, backend)
 
 
-def pairing(source: IcpCloud, target: IcpCloud, transform: np.ndarray, inlier_distance: float):
+def pairing(moving: IcpCloud, fixed: IcpCloud, T_fixed_moving: np.ndarray, inlier_distance: float):
     """``(overlap, constraint)`` of a registration, from one nearest-neighbour pass.
 
-    ``overlap``: the share of ``source``'s points that ``transform`` brings
-    within ``inlier_distance`` (m) of ``target``. ``constraint``: how well
+    ``overlap``: the share of ``moving``'s points that ``T_fixed_moving`` brings
+    within ``inlier_distance`` (m) of ``fixed``. ``constraint``: how well
     those pairs pin a translation, the smallest over the largest eigenvalue
-    of ``sum(n n^T)`` over the paired target normals (the translation part
+    of ``sum(n n^T)`` over the paired fixed normals (the translation part
     of point-to-plane ICP's information): about 0 on a plane, where ICP
     cannot tell a slide along it, up to 1 when surfaces face every way
-    (nan without normals: point-to-point).
-
-    Measured with the fitted parameters, tracking mode: every step of the default flight
-    has a constraint of 0.046 or more; on Autzen at 150 m above the ground, the
-    100 of 298 steps below 0.003 are 0.63 m off the truth on average, the
-    133 above 0.03 are 0.03 m off.
+    (nan without normals: point-to-point). On flat ground the steps with a
+    low constraint are the ones that slide off the truth, which is why the
+    health report and the loop closer test it (``benchmarks/`` measure how much).
     """
-    squared, index = target.nearest(source.points @ transform[:3, :3].T + transform[:3, 3])
+    T = T_fixed_moving
+    squared, index = fixed.nearest(moving.points @ T[:3, :3].T + T[:3, 3])
     paired = squared < inlier_distance**2
     if not paired.any():
         return 0.0, 0.0
-    if target.metric == "point-to-point":
+    if fixed.metric == "point-to-point":
         return float(paired.mean()), float("nan")
-    normals = target.normals[index[paired]]
+    normals = fixed.normals[index[paired]]
     eigen = np.linalg.eigvalsh(normals.T @ normals)
     return float(paired.mean()), float(eigen[0] / eigen[2]) if eigen[2] > 0 else 0.0
 
 
-def icp_rmse(source, target, transform: np.ndarray, inlier_distance: float) -> float:
-    """Point-to-point RMSE (m) of the pairs closer than ``inlier_distance`` after ``transform``.
+def icp_rmse(moving, fixed, T_fixed_moving: np.ndarray, inlier_distance: float) -> float:
+    """Point-to-point RMSE (m) of the pairs closer than ``inlier_distance`` after ``T_fixed_moving``.
 
-    ``source`` and ``target`` are (N, 3) arrays or Open3D clouds.
+    ``moving`` and ``fixed`` are (N, 3) arrays or Open3D clouds.
     """
-    if isinstance(source, np.ndarray):
-        source = to_cloud(check_points(source, "the moving cloud"))
-    if isinstance(target, np.ndarray):
-        target = to_cloud(check_points(target, "the fixed cloud"))
-    evaluation = o3d.pipelines.registration.evaluate_registration(source, target, inlier_distance, transform)
+    if isinstance(moving, np.ndarray):
+        moving = to_cloud(check_points(moving, "the moving cloud"))
+    if isinstance(fixed, np.ndarray):
+        fixed = to_cloud(check_points(fixed, "the fixed cloud"))
+    evaluation = o3d.pipelines.registration.evaluate_registration(moving, fixed, inlier_distance, T_fixed_moving)
     if len(evaluation.correspondence_set) == 0:
         return float("inf")
     return float(evaluation.inlier_rmse)

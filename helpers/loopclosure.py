@@ -1,153 +1,174 @@
 """Loop closure (stage 5): find old submaps near the current scan, verify them
 by ICP, then turn the best scan-to-scan match into a loop edge.
 
-Frames and conventions are those of :mod:`helpers.posegraph`: a scan is an
-(N, 3) array in its own frame, its pose carries it into the map frame, and a
-loop edge ``(i, j, T_ij)`` says ``pose_j = pose_i @ T_ij``. Submaps and their
-centres are in the map frame (:mod:`helpers.submaps`).
+:class:`LoopCloser` owns the submaps and every loop rule, in one place:
+which submaps are old enough (:func:`eligible_submaps`), how far the search
+reaches (:func:`search_radius`), the check of the candidates
+(:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`)
+and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). Figures,
+the health report and the exercises call these rules; none re-derives one.
 
-ICP is injected as ``icp_fn(moving, fixed, init) -> (T, rmse)``, where ``T``
-carries ``moving`` onto ``fixed`` starting from ``init``; :func:`icp_with`
-builds one from :func:`helpers.icp.refine_icp`, and tests pass a
-stub.
+Frames and conventions are those of :mod:`helpers.factors`: a scan is an
+(N, 3) array in its own frame, its pose ``T_map_sensor`` carries it into the
+map frame, and a loop edge ``(i, j, T_i_j)`` says ``pose_j = pose_i @ T_i_j``.
+Submaps and their centres are in the map frame (:mod:`helpers.submaps`).
+
+ICP is an ``icp_fn(moving=, fixed=, T_fixed_moving=, max_iterations=) ->
+(T_fixed_moving, surface_rmse)``: the run's
+:class:`helpers.icp_service.IcpService`, or a stub in tests.
 """
 
 from __future__ import annotations
 
 import logging
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
-from .config import LoopClosureConfig
+from .config import LoopClosureConfig, MapConfig
 from .errors import SlamError
-from .geometry import check_points, check_pose, transform_points
-from .submaps import scan_ids_of
+from .factors import Edge
+from .geometry import check_points, check_pose
+from .icp_service import SURFACE_NEIGHBORS, icp_with, surface_normals, surface_rmse
+from .submaps import SubmapIndex, scan_ids_of
 
 log = logging.getLogger(__name__)
 
-SURFACE_NEIGHBORS = 20  # neighbours of the normals that surface_rmse measures along
-PREPARED_CLOUDS = 64  # clouds an icp_fn keeps ready for ICP: the recent scans and the submaps around them
+__all__ = ["SURFACE_NEIGHBORS", "LoopCloser", "LoopQuery", "icp_with", "surface_normals", "surface_rmse"]
 
-IcpFn = Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, float]]
+IcpFn = Callable[..., tuple[np.ndarray, float]]
 
 
 class LoopCandidates(NamedTuple):
     """Matching submaps, best (lowest RMSE) first, and what the search tried.
 
-    ``poses[k]`` is the scan's pose in the map frame that ICP found against
+    ``poses[k]`` is the scan's pose ``T_map_sensor`` that ICP found against
     submap ``ids[k]``; it seeds the scan-to-scan registration.
     """
 
     ids: np.ndarray  # (L,) submap ids
-    scores: np.ndarray  # (L,) ICP RMSE, m
+    scores: np.ndarray  # (L,) surface RMSE, m
     poses: np.ndarray  # (L, 4, 4)
     n_eligible: int = 0  # submaps 0 .. n_eligible - 1 were old enough to be searched
     radius: np.ndarray = np.zeros(0)  # (S,) search radius (m) around each of the S submaps given, grown with the flight
     tried_ids: np.ndarray = np.zeros(0, dtype=int)  # (A,) the submaps registered by ICP, nearest first
-    tried_rmse: np.ndarray = np.zeros(0)  # (A,) their ICP RMSE, m
+    tried: np.ndarray = np.zeros(0)  # (A,) their surface RMSE, m (the names of LoopQuery)
 
 
 @dataclass(frozen=True)
-class LoopMatch:
-    """A verified loop: ``pose_j = pose_i @ relative_pose``, ready for :meth:`PoseGraph.add_loop`."""
+class LoopQuery:
+    """One loop-candidate query that registered at least one old submap: what
+    it searched, what it tried and what it kept (figures read these)."""
 
-    i: int  # the older scan that matched
-    j: int  # the current scan
-    relative_pose: np.ndarray
-    rmse: float
+    node: int
+    n_submaps: int  # submaps built when the query ran (centres in ``SlamResult.submaps.centres``)
+    n_eligible: int  # submaps 0 .. n_eligible - 1 were old enough to be searched
+    radius: np.ndarray  # (n_submaps,) search radius (m) around each submap, grown with the distance flown since it
+    tried_ids: np.ndarray  # the submaps registered by ICP, nearest first
+    tried: np.ndarray  # their surface RMSE (m), in the same order
+    submap_ids: np.ndarray  # the submaps below loop_closure_threshold, best first
+    scores: np.ndarray  # their surface RMSE, m
+    best_scan_rmse: float  # surface RMSE of the best scan-to-scan match (inf if no submap matched)
+    closure: Edge | None  # the accepted loop edge, if any
+    best_scan_constraint: float = float("nan")  # how well that match pins the motion (icp.pairing; nan: not measured)
 
 
-def icp_with(metric: str, inlier_distance: float, max_iterations: int, tolerance: float, backend: str) -> IcpFn:
-    """An ``icp_fn``: :func:`helpers.icp.refine_icp` with these
-    settings, scored by :func:`surface_rmse` (not by the point-to-point RMSE).
+class LoopCloser:
+    """The submaps of a run and its loop queries, scan after scan (the
+    reference's main loop after the odometry)::
 
-    The function takes ``iterations`` as a fourth, optional argument: another
-    cap than ``max_iterations`` for one call. Its ``constraint(moving, fixed,
-    transform)`` says how well a registration's pairs pin the translation
-    (:func:`helpers.icp.pairing`).
+        loops = LoopCloser(config.loop_closure, config.map, icp)
+        query = loops.add(node, cloud, T_map_sensor, clouds, poses)  # a LoopQuery, or None
 
-    The same scans and submaps are registered again and again, so a cloud
-    is made ready for ICP (:func:`helpers.icp.icp_cloud`) once while it is
-    among the :data:`PREPARED_CLOUDS` used last, and its normals serve the
-    score too. The bound keeps memory flat on long flights: a prepared cloud
-    takes about 1.5 MB, 8 times its points.
+    ``clouds`` and ``poses`` are every accepted scan so far (own frames) and
+    the odometry poses the submaps are built with. It reads
+    ``[loop_closure]`` and ``[map]`` only; ``icp`` is the run's ICP service.
     """
-    from .icp import icp_cloud, pairing, refine_icp
 
-    prepared = OrderedDict()  # id(points) -> (points, IcpCloud), least recently used first; points keep the id unique
-    with_normals = metric if metric != "point-to-point" else "point-to-plane"  # the score needs normals
+    def __init__(self, settings: LoopClosureConfig, map_settings: MapConfig, icp: IcpFn) -> None:
+        self.settings, self.icp = settings, icp
+        self.submaps = SubmapIndex(map_settings.n_scans_per_submap, map_settings.align_grid_step)
+        self.queries: list[LoopQuery] = []
 
-    def ready(points):
-        key = id(points)
-        if key in prepared:
-            prepared.move_to_end(key)
-        else:
-            prepared[key] = (points, icp_cloud(points, with_normals, backend))
-            if len(prepared) > PREPARED_CLOUDS:
-                prepared.popitem(last=False)
-        return prepared[key][1]
+    @property
+    def loops(self) -> list[Edge]:
+        """The accepted loop edges, in the order they were found."""
+        return [q.closure for q in self.queries if q.closure is not None]
 
-    def icp(moving, fixed, init, iterations=None):
-        source, target = ready(moving), ready(fixed)
-        if metric == "point-to-point":
-            source, target = moving, fixed
-        cap = max_iterations if iterations is None else iterations
-        transform, _ = refine_icp(source, target, init, metric, inlier_distance, cap, tolerance, backend)
-        return transform, surface_rmse(moving, ready(fixed), transform, inlier_distance)
+    def add(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses) -> LoopQuery | None:
+        """Add accepted scan ``node`` to the current submap (a new one every
+        ``n_scans_per_submap`` scans) and, once there are more than
+        ``sub_map_thresh`` submaps, query the old ones for a loop."""
+        self.submaps.add_scan(cloud, pose)
+        if len(self.submaps) <= self.settings.sub_map_thresh:
+            return None
+        query = self.query(node, cloud, pose, clouds, poses)
+        if query is not None:
+            self.queries.append(query)
+        return query
 
-    def constraint(moving, fixed, transform):
-        """How well the pairs of a registration pin its translation (:func:`helpers.icp.pairing`)."""
-        return pairing(ready(moving), ready(fixed), transform, inlier_distance)[1]
+    def query(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses) -> LoopQuery | None:
+        """One loop query of node ``node``: (1) the old submaps near its pose,
+        verified by ICP; (2) the best scan of the matching submaps, kept as a
+        loop edge if :meth:`accepts` it. None if no submap was registered."""
+        submaps, settings = self.submaps, self.settings
+        # 1. Old submaps within the (growing) search radius, verified by ICP.
+        candidates = find_loop_candidates(
+            submaps.points, submaps.centres, cloud, pose, len(submaps) - 1, self.icp, settings
+        )
+        if not len(candidates.tried_ids):
+            return None
+        # 2. The best scan-to-scan match of the matching submaps becomes the loop edge, if accepted.
+        closure, best, pinned = None, float("inf"), float("nan")
+        if len(candidates.ids):
+            n = submaps.n_scans_per_submap
+            match = best_scan_registration(cloud, node, candidates, clouds, poses, n, self.icp, settings)
+            best = match.surface_rmse
+            if match.surface_rmse < settings.rmse_threshold:
+                pinned = self.icp.constraint(moving=cloud, fixed=clouds[match.i], T_fixed_moving=match.relative)
+            if self.accepts(match.surface_rmse, pinned):
+                log.info("loop edge %d -> %d, surface RMSE %.3f m", match.i, match.j, match.surface_rmse)
+                closure = match
+            elif match.surface_rmse < settings.rmse_threshold:
+                log.info("loop %d -> %d left out: ground too flat (constraint %.4f)", match.i, match.j, pinned)
+        return LoopQuery(
+            node=node,
+            n_submaps=len(submaps),
+            n_eligible=candidates.n_eligible,
+            radius=candidates.radius,
+            tried_ids=candidates.tried_ids,
+            tried=candidates.tried,
+            submap_ids=candidates.ids,
+            scores=candidates.scores,
+            best_scan_rmse=best,
+            closure=closure,
+            best_scan_constraint=pinned,
+        )
 
-    icp.constraint = constraint
-    return icp
+    def accepts(self, rmse: float, constraint: float) -> bool:
+        """A best scan match is a loop edge if it fits (surface RMSE below
+        ``rmse_threshold``) and pins the motion (``constraint`` at least
+        ``min_constraint``; nan, not measured, passes): on flat ground any
+        slide fits as well."""
+        return rmse < self.settings.rmse_threshold and not constraint < self.settings.min_constraint
 
 
-def surface_normals(points: np.ndarray) -> np.ndarray:
-    """Unit normals (N, 3) of a cloud, from :data:`SURFACE_NEIGHBORS` neighbours."""
-    from .features import to_cloud
+def eligible_submaps(n_submaps: int, settings: LoopClosureConfig) -> int:
+    """How many submaps (0 .. n - 1) a query may search when ``n_submaps`` are
+    built: all but the ``sub_map_thresh`` newest."""
+    return max(0, n_submaps - settings.sub_map_thresh)
 
-    return np.asarray(to_cloud(points, normals_knn=SURFACE_NEIGHBORS).normals)
 
-
-def surface_rmse(moving: np.ndarray, fixed: np.ndarray, transform: np.ndarray, inlier_distance: float, normals=None):
-    """RMS distance (m) from the moved points to the fixed cloud's *surface*:
-    each moved point is paired with its nearest fixed point (pairs farther
-    than ``inlier_distance`` are ignored) and measured along that point's
-    normal.
-
-    Why not the point-to-point RMSE the reference reports: this lidar's rows
-    are 2.1 m apart along the track, so two perfectly aligned scans taken
-    1 m apart have points about 1 m from their nearest neighbours, more than
-    when they are 1 m out of line (measured: 1.11 m aligned, 0.74 m when
-    1 m off). Measured along the normals, the error grows with the
-    misalignment (0.33 m aligned, 0.40 m at 1 m, 0.60 m at 3 m).
-    ``normals`` of ``fixed`` may be given when they are already known; a
-    ``fixed`` made ready for ICP (:class:`helpers.icp.IcpCloud` with normals)
-    brings its own normals and k-d tree.
-    """
-    from .icp import IcpCloud
-
-    moved = transform_points(moving, transform)
-    if isinstance(fixed, IcpCloud):
-        squared, nearest = fixed.nearest(moved)
-        fixed, normals = fixed.points, fixed.normals
-    else:
-        from scipy.spatial import cKDTree
-
-        distance, nearest = cKDTree(fixed).query(moved, distance_upper_bound=inlier_distance)
-        squared = distance**2
-    paired = squared < inlier_distance**2
-    if paired.sum() < SURFACE_NEIGHBORS:
-        return float("inf")
-    normals = surface_normals(fixed) if normals is None else normals
-    q = nearest[paired]
-    along_normal = np.einsum("ij,ij->i", moved[paired] - fixed[q], normals[q])
-    return float(np.sqrt(np.mean(along_normal**2)))
+def search_radius(submap_centres: np.ndarray, position: np.ndarray, settings: LoopClosureConfig) -> np.ndarray:
+    """The search radius (m) around every submap for a scan at ``position``:
+    ``loop_closure_search_radius + loop_search_growth * d``, with ``d`` the
+    distance flown since the submap (:func:`distance_flown_since`). Odometry
+    drift grows with the distance flown, so an old place can look farther
+    away than it is; a growth of 0 is the reference's fixed radius."""
+    flown = distance_flown_since(np.asarray(submap_centres, float).reshape(-1, 3), position)
+    return settings.loop_closure_search_radius + settings.loop_search_growth * flown
 
 
 def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:
@@ -171,13 +192,10 @@ def find_loop_candidates(
     1. Only submaps ``0 .. current_submap_id - sub_map_thresh`` are eligible
        (``current_submap_id`` is the newest built submap; the ``sub_map_thresh``
        newest are skipped).
-    2. Keep those whose centre is nearer than the radius to the scan's
-       position. The radius is ``loop_closure_search_radius + loop_search_growth * d``,
-       with ``d`` the distance flown since the submap (:func:`distance_flown_since`):
-       odometry drift grows with the distance flown, so an old place can look
-       farther away than it is. A growth of 0 is the reference's fixed radius.
+    2. Keep those whose centre is nearer than :func:`search_radius` to the
+       scan's position.
     3. Sort them by distance and register the scan to at most ``max_attempts``
-       of them: ``icp_fn(scan_points, submap, scan_pose)``.
+       of them, from ``scan_pose``.
     4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
        ``max_returned``, lowest RMSE first.
 
@@ -187,22 +205,26 @@ def find_loop_candidates(
     scan_points = check_points(scan_points, "the current scan")
     scan_pose = check_pose(scan_pose, "the current scan pose")
     _check_search(submaps, centres, current_submap_id)
-    sub_map_thresh, max_attempts = settings.sub_map_thresh, settings.max_attempts
+    max_attempts = settings.max_attempts
 
     # 1.-2. eligible submaps within the (growing) radius, nearest first
     position = scan_pose[:3, 3]
-    eligible = centres[: max(0, current_submap_id - sub_map_thresh + 1)]
+    eligible = centres[: eligible_submaps(current_submap_id + 1, settings)]
     distance = np.linalg.norm(eligible - position, axis=1)
-    flown = distance_flown_since(centres[: current_submap_id + 1], position)
-    radius = settings.loop_closure_search_radius + settings.loop_search_growth * flown
+    radius = search_radius(centres[: current_submap_id + 1], position, settings)
     near = np.flatnonzero(distance < radius[: len(eligible)])
     near = near[np.argsort(distance[near], kind="stable")]
 
     # 3. verify the nearest few by ICP
     found, tried = [], []
     for submap_id in near[:max_attempts]:
-        pose, rmse = icp_fn(scan_points, submaps[submap_id], scan_pose)
-        log.debug("submap %d at %.1f m: ICP RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        pose, rmse = icp_fn(
+            moving=scan_points,
+            fixed=submaps[submap_id],
+            T_fixed_moving=scan_pose,
+            max_iterations=settings.icp_max_iterations,
+        )
+        log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)
         tried.append(rmse)
         if rmse < settings.loop_closure_threshold:
             found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
@@ -217,32 +239,8 @@ def find_loop_candidates(
         n_eligible=len(eligible),
         radius=radius,
         tried_ids=near[:max_attempts].astype(int),
-        tried_rmse=np.array(tried, dtype=float),
+        tried=np.array(tried, dtype=float),
     )
-
-
-def best_scan_match(
-    scan_points: np.ndarray,
-    current_id: int,
-    candidates: LoopCandidates,
-    scans: Sequence[np.ndarray],
-    poses: np.ndarray,
-    n_scans_per_submap: int,
-    rmse_threshold: float,
-    icp_fn: IcpFn,
-) -> LoopMatch | None:
-    """Register the current scan to every scan of the matching submaps; keep the best.
-
-    The lowest-RMSE match of :func:`best_scan_registration` becomes a
-    :class:`LoopMatch` ``(i, current_id)`` if its RMSE is below
-    ``rmse_threshold``; otherwise there is no loop (None).
-    """
-    best = best_scan_registration(scan_points, current_id, candidates, scans, poses, n_scans_per_submap, icp_fn)
-    if best is None or not best.rmse < rmse_threshold:
-        log.debug("no loop edge: best scan RMSE %s m", None if best is None else round(best.rmse, 3))
-        return None
-    log.info("loop edge %d -> %d, ICP RMSE %.3f m", best.i, best.j, best.rmse)
-    return best
 
 
 def best_scan_registration(
@@ -253,15 +251,18 @@ def best_scan_registration(
     poses: np.ndarray,
     n_scans_per_submap: int,
     icp_fn: IcpFn,
-) -> LoopMatch | None:
+    settings: LoopClosureConfig | None = None,
+) -> Edge | None:
     """The lowest-RMSE registration of the current scan onto a scan of the
     matching submaps, whatever its RMSE (None if there is no candidate).
 
     ``scans`` and ``poses`` are all accepted scans (own frames) and the pose
     estimates the submaps were built with. The registration onto scan ``i``
     starts from ``inv(poses[i]) @ candidates.poses[k]``, the scan's pose found
-    against its submap, seen from scan ``i``.
+    against its submap, seen from scan ``i``, with the ICP iteration cap of
+    ``settings`` (the icp_fn's own when None).
     """
+    cap = None if settings is None else settings.icp_max_iterations
     scan_points = check_points(scan_points, "the current scan")
     poses = np.asarray(poses, dtype=float)
     best = None
@@ -270,9 +271,9 @@ def best_scan_registration(
             if not 0 <= i < min(len(scans), len(poses)):
                 raise SlamError(f"submap {submap_id} holds scan {i}, but only {len(scans)} scans were given")
             init = np.linalg.inv(check_pose(poses[i], f"the pose of scan {i}")) @ submap_pose
-            relative, rmse = icp_fn(scan_points, scans[i], init)
-            if best is None or rmse < best.rmse:
-                best = LoopMatch(i, int(current_id), check_pose(relative, "the ICP result"), float(rmse))
+            T_i_j, rmse = icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init, max_iterations=cap)
+            if best is None or rmse < best.surface_rmse:
+                best = Edge(i, int(current_id), check_pose(T_i_j, "the ICP result"), float(rmse))
     return best
 
 

@@ -1,70 +1,31 @@
 """Stage 3c: lidar odometry, scan to scan, as the reference's registration loop.
 
 Every ``skip_frames``-th scan is *accepted*. Each accepted scan is registered
-to the previous one: grid-average downsampling, FPFH descriptors of its
-keypoints (every point by default: ``[features] keypoint_share``), descriptor
-matching, a robust rigid fit (MSAC) and an ICP refinement. Chaining the
-relative transforms from the first ground-truth pose gives the trajectory.
-
-Cost: every accepted scan is prepared once (:func:`prepare`: downsampled,
-described, and its ICP cloud given normals and generalized-ICP covariances)
-and that preparation serves twice, as the moving scan of one pair and the
-fixed scan of the next; per pair only matching, the robust fit and the ICP
-iterations remain. The ICP stops when an iteration changes its RMSE by less
-than ``[registration] icp_tolerance`` metres and its inlier fraction by less
-than that fraction (a tighter criterion sometimes oscillates by a few inliers until
-the iteration cap); what this tolerance costs and changes is measured by
-``benchmarks/bench_registration.py`` and kept in the README.
+to the previous one (:mod:`helpers.frames`: grid-average downsampling, FPFH
+descriptors, descriptor matching, a robust rigid fit and an ICP
+refinement). Chaining the relative transforms from the first pose gives the
+trajectory. :class:`Odometry` does it one frame at a time, keeping the
+previous frame and the last motion between calls; :func:`run_odometry` runs
+it over a whole flight.
 """
 
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .config import Config, RegistrationConfig
+from .config import Config
 from .errors import SlamError
-from .features import grid_average, keypoint_fpfh, match_features
-from .geometry import check_points, rotation_angle_deg
-from .icp import IcpCloud, icp_cloud, pairing, refine_icp
+from .frames import STAGES, Frame, PairRegistration, describe, prepare, register_frames, register_pair, track_frames
+from .geometry import check_points, check_pose
+from .icp_service import IcpService
 from .progress import progress_bar
-from .registration import estimate_rigid_msac
 
 log = logging.getLogger(__name__)
 
-STAGES = ("downsample", "fpfh", "match", "msac", "icp")
-
-
-@dataclass
-class Frame:
-    """One scan, prepared for registration."""
-
-    points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
-    features: np.ndarray | None  # (K, 33) normalised FPFH descriptors of the keypoints (None until :func:`describe`)
-    icp_points: np.ndarray  # (M, 3) the cloud ICP works on
-    timings: dict  # ms per preparation stage
-    icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
-    keypoints: np.ndarray | None = None  # (K,) indices of the points that have descriptors (None: all)
-
-
-@dataclass
-class PairRegistration:
-    """Everything one scan-to-scan registration produced (moving -> fixed)."""
-
-    moving: np.ndarray  # (N, 3) downsampled moving scan
-    fixed: np.ndarray  # (M, 3) downsampled fixed scan
-    matches: np.ndarray  # (K, 2) index pairs (moving, fixed)
-    inliers: np.ndarray  # (K,) bool, matches the robust fit kept
-    T_coarse: np.ndarray  # 4 x 4, robust fit (or the fallback guess)
-    T_fine: np.ndarray  # 4 x 4, after ICP
-    rmse: float  # m, ICP inlier RMSE
-    timings: dict  # ms per stage
-    fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
-    tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
-    constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
+__all__ = ["STAGES", "Frame", "Odometry", "OdometryResult", "prepare", "register_frames", "register_pair"]
 
 
 @dataclass
@@ -72,155 +33,103 @@ class OdometryResult:
     """The odometry over all accepted scans."""
 
     indices: np.ndarray  # (K,) indices of the accepted scans
-    poses: np.ndarray  # (K, 4, 4) estimated sensor poses in the map frame
-    relative: np.ndarray  # (K-1, 4, 4) transform of accepted scan k+1 into the frame of scan k
+    poses: np.ndarray  # (K, 4, 4) T_map_sensor of every accepted scan
+    relative: np.ndarray  # (K-1, 4, 4) T_k_k+1: carries accepted scan k+1 into the frame of scan k
     n_matches: np.ndarray  # (K-1,) descriptor matches per step
     n_inliers: np.ndarray  # (K-1,) matches kept by MSAC (0 when it failed)
-    rmse: np.ndarray  # (K-1,) m, ICP RMSE per step
+    rmse: np.ndarray  # (K-1,) m, ICP's point-to-point RMSE per step
     timings: dict[str, np.ndarray]  # ms per stage and accepted scan, (K,) each; step 0 has no match/msac/icp
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
     tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
     constraint: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K-1,) helpers.icp.pairing, per step
 
 
-def prepare(scan: np.ndarray, config: Config) -> Frame:
-    """Downsample one scan, describe it (not yet in tracking mode: see
-    :func:`describe`) and make its ICP cloud ready.
+class Odometry:
+    """Scan-to-scan odometry, one accepted frame at a time::
 
-    ``timings`` has the ms of ``downsample``, ``fpfh`` and ``icp`` (the ICP
-    cloud's normals, covariances and k-d tree, paid once per scan).
+        odometry = Odometry(config, T_map_first=first_pose)
+        for index in accepted:
+            pair = odometry.register(prepare(scans[index], config), index)  # None for the first frame
+        odometry.poses[-1], odometry.result()
+
+    It reads ``[registration]`` and ``[features]`` only; ``icp`` is the run's
+    ICP service (its own when not given).
     """
-    registration = config.registration
-    timings = {}
-    start = time.perf_counter()
-    points = grid_average(scan, config.features.grid_step)
-    icp_step = registration.icp_grid_step
-    icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
-    timings["downsample"] = _ms(start)
-    start = time.perf_counter()
-    icp = icp_cloud(icp_points, registration.metric, registration.icp_backend)
-    timings["icp"] = _ms(start)
-    frame = Frame(points, None, icp_points, timings, icp)
-    return frame if registration.mode == "tracking" else describe(frame, config)
 
+    def __init__(self, config: Config, T_map_first: np.ndarray, icp: IcpService | None = None) -> None:
+        self.config = config
+        self.icp = icp or IcpService.from_config(config.registration)
+        self.poses = [check_pose(T_map_first, "the first pose")]
+        self.relative: list[np.ndarray] = []
+        self.indices: list[int] = []
+        self._pairs: list[PairRegistration] = []
+        self._timings: list[dict] = []
+        self.fallbacks: list[tuple[int, str]] = []
+        self._previous: Frame | None = None
+        self._tracking = config.registration.mode == "tracking"
 
-def describe(frame: Frame, config: Config) -> Frame:
-    """Give ``frame`` its FPFH descriptors and keypoints, once."""
-    if frame.features is None:
-        start = time.perf_counter()
-        frame.keypoints, frame.features = keypoint_fpfh(
-            frame.points, config.features.neighbors, config.features.keypoint_share
+    def register(self, frame: Frame, index: int) -> PairRegistration | None:
+        """Register ``frame`` (dataset scan ``index``) onto the previous frame and chain its pose."""
+        config, previous = self.config, self._previous
+        motion = self.relative[-1] if self.relative else None
+        timings, pair = dict.fromkeys(STAGES, 0.0), None
+        if previous is not None:
+            # 1. Tracking: ICP from the last motion; the global registration only if that fails its checks.
+            doubt = ""
+            if self._tracking and motion is not None:
+                pair, doubt = track_frames(frame, previous, config, motion, self.icp)
+            if pair is None or doubt:
+                if pair is not None:
+                    log.info("scan %d: tracking doubtful (%s); registered globally", index, doubt)
+                    timings["icp"] += pair.timings["icp"]
+                # 2. Match, robust fit, ICP (the previous frame's descriptors, if not made yet, count here).
+                described = previous.timings.get("fpfh", 0.0)
+                describe(previous, config)
+                timings["fpfh"] += previous.timings.get("fpfh", 0.0) - described
+                pair = register_frames(describe(frame, config), previous, config, guess=motion, icp=self.icp)
+            for stage, ms in pair.timings.items():
+                timings[stage] += ms
+            if pair.fallback:
+                self.fallbacks.append((int(index), pair.fallback))
+                log.info("scan %d: %s", index, pair.fallback)  # counted, and summed up by helpers.health
+            # 3. Chain the relative motion onto the previous pose.
+            self.relative.append(pair.T_fine)
+            self.poses.append(self.poses[-1] @ pair.T_fine)
+            self._pairs.append(pair)
+        for stage, ms in frame.timings.items():
+            timings[stage] += ms
+        self._timings.append(timings)
+        self.indices.append(int(index))
+        self._previous = frame
+        return pair
+
+    def result(self) -> OdometryResult:
+        """What the odometry estimated so far."""
+        pairs = self._pairs
+        return OdometryResult(
+            indices=np.array(self.indices, dtype=np.int64),
+            poses=np.array(self.poses[: len(self.indices)]).reshape(-1, 4, 4),
+            relative=np.array(self.relative).reshape(-1, 4, 4),
+            n_matches=np.array([len(p.matches) for p in pairs], dtype=np.int64),
+            n_inliers=np.array([int(p.inliers.sum()) for p in pairs], dtype=np.int64),
+            rmse=np.array([p.rmse for p in pairs], dtype=float),
+            timings={stage: np.array([t[stage] for t in self._timings]) for stage in STAGES},
+            fallbacks=list(self.fallbacks),
+            tracked=np.array([p.tracked for p in pairs], dtype=bool),
+            constraint=np.array([p.constraint for p in pairs], dtype=float),
         )
-        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
-    return frame
 
 
-def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray) -> tuple[PairRegistration, str]:
-    """Register ``moving`` onto ``fixed`` by ICP alone, from the last ``motion``
-    (a constant-velocity guess). Returns the registration and, when it cannot
-    be trusted, why: an ICP RMSE above ``icp_fallback_rmse``, a result that
-    jumps more than ``tracking_max_jump_m`` / ``tracking_max_jump_deg`` from the
-    guess, or fewer than ``tracking_min_overlap`` of the points paired."""
-    fit = config.registration
-    start = time.perf_counter()
-    T_fine, rmse = _icp(moving, fixed, motion, fit)
-    jump = np.linalg.inv(motion) @ T_fine
-    jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
-    paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
-    timings = {"icp": _ms(start)}
-    reasons = []
-    if not rmse <= fit.icp_fallback_rmse:
-        reasons.append(f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m")
-    if jump_m > fit.tracking_max_jump_m or jump_deg > fit.tracking_max_jump_deg:
-        reasons.append(f"{jump_m:.2f} m and {jump_deg:.2f} deg from the last motion")
-    if paired < fit.tracking_min_overlap:
-        reasons.append(f"{paired:.0%} of the points paired")
-    none = np.zeros((0, 2), dtype=np.int64)
-    pair = PairRegistration(
-        moving.points,
-        fixed.points,
-        none,
-        np.zeros(0, bool),
-        motion,
-        T_fine,
-        rmse,
-        timings,
-        tracked=True,
-        constraint=constraint,
-    )
-    return pair, "; ".join(reasons)
-
-
-def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None):
-    """Register ``moving`` onto ``fixed``; ``guess`` (4 x 4) is the fallback
-    initial transform (identity if None) when the robust fit fails or ICP
-    ends far off. Never raises on a hard pair: the reason is in ``fallback``."""
-    guess = np.eye(4) if guess is None else guess
-    features, fit = config.features, config.registration
-    timings, fallback = {}, None
-
-    # 1. Match the keypoints' descriptors (current scan = moving, previous scan = fixed).
-    start = time.perf_counter()
-    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
-    for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
-        if len(frame.features) != len(chosen):
-            raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
-    matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio)
-    matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
-    timings["match"] = _ms(start)
-
-    # 2. Robust rigid fit on the matched points.
-    start = time.perf_counter()
-    inliers = np.zeros(len(matches), dtype=bool)
-    try:
-        T_coarse, inliers = estimate_rigid_msac(
-            moving.points[matches[:, 0]],
-            fixed.points[matches[:, 1]],
-            fit.max_distance,
-            fit.max_num_trials,
-            fit.seed,
-            fit.confidence,
-        )
-    except SlamError as exc:
-        T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
-    timings["msac"] = _ms(start)
-
-    # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
-    start = time.perf_counter()
-    T_fine, rmse = _icp(moving, fixed, T_coarse, fit)
-    if rmse > fit.icp_fallback_rmse and fallback is None:
-        T_retry, rmse_retry = _icp(moving, fixed, guess, fit)
-        fallback = f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m from the robust fit; "
-        if rmse_retry < rmse:
-            T_fine, rmse, T_coarse = T_retry, rmse_retry, guess
-            fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
-        else:
-            fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
-    constraint = float("nan")
-    if moving.icp is not None and fixed.icp is not None:
-        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
-    timings["icp"] = _ms(start)
-    return PairRegistration(
-        moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback, constraint=constraint
-    )
-
-
-def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=None) -> PairRegistration:
-    """Downsample, describe, match, fit and refine one pair of scans
-    (moving -> fixed), returning everything a figure needs."""
-    config = config or Config()
-    moving = describe(prepare(check_points(moving_scan, "the moving scan"), config), config)
-    fixed = describe(prepare(check_points(fixed_scan, "the fixed scan"), config), config)
-    result = register_frames(moving, fixed, config, guess)
-    result.timings = _add(moving.timings, result.timings)
-    return result
+def accepted_indices(n_scans: int, config: Config) -> np.ndarray:
+    """The dataset indices of the accepted scans: every ``skip_frames``-th, from the first."""
+    return np.arange(0, n_scans, config.registration.skip_frames)
 
 
 def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None, progress=False) -> OdometryResult:
     """Odometry over the accepted scans of a Dataset (or a list of (N, 3) scans).
 
-    ``first_pose`` (4 x 4) anchors the first accepted scan; by default the
-    dataset's first ground-truth pose (identity for a bare list of scans).
+    ``first_pose`` (4 x 4, ``T_map_sensor``) anchors the first accepted scan;
+    by default the dataset's first ground-truth pose (identity for a bare list of scans).
     """
     config = config or Config()
     scans = getattr(dataset_or_scans, "scans", dataset_or_scans)
@@ -230,91 +139,13 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
     first_pose = np.asarray(first_pose, dtype=np.float64)
     if first_pose.shape != (4, 4):
         raise SlamError(f"the first pose must be a 4 x 4 matrix, got shape {first_pose.shape}")
-    indices = np.arange(0, len(scans), config.registration.skip_frames)
+    indices = accepted_indices(len(scans), config)
     if len(indices) < 2:
         raise SlamError(f"odometry needs at least 2 accepted scans, got {len(indices)} from {len(scans)} scans")
-
-    poses, relative = [first_pose], []
-    n_matches, n_inliers, rmse, fallbacks = [], [], [], []
-    timings = {stage: np.zeros(len(indices)) for stage in STAGES}
-    previous, motion = None, None
-    tracking, tracked, constraint = config.registration.mode == "tracking", [], []
+    odometry = Odometry(config, first_pose)
     bar = progress_bar(len(indices), "odometry", enabled=progress)
-    for k, index in enumerate(indices):
-        # 1. Downsample the accepted scan and extract its FPFH descriptors (tracking: only when needed).
-        current = prepare(check_points(scans[index], f"scan {index}"), config)
-        if previous is not None:
-            # 2. Register it to the previous accepted scan: match, robust fit, ICP;
-            #    tracking: ICP from the last motion, the rest only if that fails its checks.
-            pair, doubt = (
-                track_frames(current, previous, config, motion) if tracking and motion is not None else (None, "")
-            )
-            if pair is None or doubt:
-                if pair is not None:
-                    log.info("scan %d: tracking doubtful (%s); registered globally", index, doubt)
-                    timings["icp"][k] += pair.timings["icp"]
-                described = previous.timings.get("fpfh", 0.0)
-                describe(previous, config)  # its time counts here: the previous step was already summed
-                timings["fpfh"][k] += previous.timings.get("fpfh", 0.0) - described
-                pair = register_frames(describe(current, config), previous, config, guess=motion)
-            for stage, ms in pair.timings.items():
-                timings[stage][k] += ms
-            tracked.append(pair.tracked)
-            constraint.append(pair.constraint)
-            if pair.fallback:
-                fallbacks.append((int(index), pair.fallback))
-                log.info("scan %d: %s", index, pair.fallback)  # counted, and summed up by helpers.health
-            # 3. Chain the relative motion onto the previous pose.
-            motion = pair.T_fine
-            relative.append(motion)
-            poses.append(poses[-1] @ motion)
-            n_matches.append(len(pair.matches))
-            n_inliers.append(int(pair.inliers.sum()))
-            rmse.append(pair.rmse)
-        for stage, ms in current.timings.items():
-            timings[stage][k] += ms
-        previous = current
+    for index in indices:
+        odometry.register(prepare(check_points(scans[index], f"scan {index}"), config), index)
         bar.update(1)
     bar.close()
-    return OdometryResult(
-        indices=indices,
-        poses=np.array(poses),
-        relative=np.array(relative).reshape(-1, 4, 4),
-        n_matches=np.array(n_matches, dtype=np.int64),
-        n_inliers=np.array(n_inliers, dtype=np.int64),
-        rmse=np.array(rmse),
-        timings=timings,
-        fallbacks=fallbacks,
-        tracked=np.array(tracked, dtype=bool),
-        constraint=np.array(constraint, dtype=float),
-    )
-
-
-def _icp(moving: Frame, fixed: Frame, init: np.ndarray, fit: RegistrationConfig) -> tuple[np.ndarray, float]:
-    """ICP between the frames' prepared clouds (bare points for a Frame built by hand)."""
-    wanted = (fit.metric, fit.icp_backend)
-    source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
-    target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
-    return refine_icp(
-        source,
-        target,
-        init,
-        fit.metric,
-        fit.inlier_distance,
-        fit.icp_max_iterations,
-        fit.icp_tolerance,
-        fit.icp_backend,
-    )
-
-
-def _add(*timings: dict) -> dict:
-    """Stage timings (ms) summed stage by stage."""
-    out = {}
-    for part in timings:
-        for stage, ms in part.items():
-            out[stage] = out.get(stage, 0.0) + ms
-    return out
-
-
-def _ms(start: float) -> float:
-    return 1000.0 * (time.perf_counter() - start)
+    return odometry.result()

@@ -1,20 +1,14 @@
 """A 3-D pose graph on GTSAM, with numpy at the boundary (stage 6).
 
-Conventions, used everywhere in this module:
+The graph keeps a list of factors (:mod:`helpers.factors` says their
+conventions: poses ``T_map_sensor``, edges ``T_i_j`` with
+``pose_j = pose_i @ T_i_j``, sigmas and information translation first).
+:meth:`PoseGraph.add_factor` takes any factor, a new kind included;
+``add_odometry``, ``append`` and ``add_loop`` are the usual ones by name.
 
-* A pose is a 4 x 4 rigid transform from its scan's frame to the map frame:
-  ``p_map = pose @ p_scan``.
-* An edge ``(i, j, T_ij)`` says ``pose_j = pose_i @ T_ij``: ``T_ij`` carries
-  points of scan ``j`` into the frame of scan ``i``. ICP that registers scan
-  ``j`` (moving) onto scan ``i`` (fixed) returns exactly this ``T_ij``.
-* Six-vectors and information matrices given to or returned by this module
-  are TRANSLATION FIRST, ``[x y z rx ry rz]``, as in the reference's
-  ``poseGraph3D``. GTSAM orders a Pose3 tangent vector rotation first, so the
-  module permutes every information matrix (and sigma vector) on the way in.
-
-The rhythm is GTSAM's own: graph, prior on the first node, odometry edges,
-loop edges, initial values, optimise (Levenberg-Marquardt), with the graph
-error logged before and after.
+The rhythm is GTSAM's own: graph, prior on the first node, the factors in
+the order they were added, initial values, optimise (Levenberg-Marquardt),
+with the graph error logged before and after.
 """
 
 from __future__ import annotations
@@ -27,26 +21,29 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from .config import LOOP_KERNELS
 from .errors import SlamError
+from .factors import (
+    KERNEL_SCALES,
+    LOOP_INFORMATION,
+    ODOMETRY_SIGMAS,
+    PRIOR_SIGMAS,
+    BetweenFactor,
+    Factor,
+    FactorContext,
+    LoopFactor,
+    PriorFactor,
+    check_information,
+    information_from_sigmas,
+    loop_noise_factory,
+    pose3,
+)
 from .geometry import check_pose
 
 log = logging.getLogger(__name__)
 
-# The reference weighs every edge, odometry and loop alike, with the identity
-# information matrix: one sigma of 1 m on each translation and 1 rad on each
-# rotation component. Order: x y z rx ry rz.
-ODOMETRY_SIGMAS = np.ones(6)
-LOOP_INFORMATION = np.eye(6)
-# The anchor (the reference's FirstNodePose) is held by a very stiff prior.
-PRIOR_SIGMAS = np.full(6, 1e-4)
-# Robust kernels act on the whitened residual norm (in sigmas). These are the
-# textbook tunings that keep 95 % efficiency on Gaussian noise.
-KERNEL_SCALES = {"huber": 1.345, "cauchy": 2.3849}
-_ESTIMATORS = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}
-MAX_ITERATIONS = 100
+__all__ = ["KERNEL_SCALES", "PRIOR_SIGMAS", "OptimizationResult", "PoseGraph", "information_from_sigmas"]
 
-_TO_GTSAM = np.array([3, 4, 5, 0, 1, 2])  # translation-first index -> rotation-first order
+MAX_ITERATIONS = 100
 
 
 @dataclass(frozen=True)
@@ -73,31 +70,23 @@ class OptimizationResult:
     loop_weights: np.ndarray
 
 
-@dataclass(frozen=True)
-class _Edge:
-    i: int
-    j: int
-    relative: np.ndarray
-    information: np.ndarray  # translation first
-
-
 class PoseGraph:
-    """Nodes with initial 4 x 4 poses, odometry edges and loop edges.
+    """Nodes with initial 4 x 4 poses, and factors between them.
 
     For example::
 
         graph = PoseGraph()
         graph.add_node(np.eye(4))  # node 0
         graph.append(step)  # node 1 at pose_0 @ step, joined by an odometry edge
-        graph.add_loop(0, 1, T_01)  # a loop edge: pose_1 = pose_0 @ T_01
+        graph.add_loop(0, 1, T_0_1)  # a loop edge: pose_1 = pose_0 @ T_0_1
+        graph.add_factor(PriorFactor(1, T_map_sensor, sigmas))  # any other factor
         result = graph.optimize(anchor_pose=first_true_pose, loop_kernel="cauchy")
         result.poses, result.loop_weights
     """
 
     def __init__(self) -> None:
         self._poses: list[np.ndarray] = []
-        self._odometry: list[_Edge] = []
-        self._loops: list[_Edge] = []
+        self.factors: list[Factor] = []
 
     # -- building -----------------------------------------------------------
     @property
@@ -114,33 +103,45 @@ class PoseGraph:
         self._poses.append(check_pose(pose, f"the initial pose of node {self.num_nodes}"))
         return self.num_nodes - 1
 
-    def add_odometry(self, i: int, j: int, relative_pose: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> None:
-        """An odometry edge ``pose_j = pose_i @ relative_pose``, noise ``sigmas`` (x y z rx ry rz)."""
-        self._odometry.append(self._edge(i, j, relative_pose, information_from_sigmas(sigmas), "odometry"))
+    def add_factor(self, factor: Factor) -> Factor:
+        """Add any factor whose ``nodes`` exist (see :mod:`helpers.factors`); returns it."""
+        kind = type(factor).__name__
+        for k in factor.nodes:
+            if not isinstance(k, (int, np.integer)) or not 0 <= k < self.num_nodes:
+                raise SlamError(f"{kind} on {factor.nodes}: node {k} does not exist (the graph has {self.num_nodes})")
+        if len(factor.nodes) == 2 and factor.nodes[0] == factor.nodes[1]:
+            raise SlamError(f"{kind} on {factor.nodes} joins a node to itself")
+        self.factors.append(factor)
+        return factor
 
-    def append(self, relative_pose: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> int:
-        """Chain a new node after the last one (like ``addRelativePose`` without ids); returns its id."""
+    def add_odometry(self, i: int, j: int, T_i_j: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> None:
+        """An odometry edge ``pose_j = pose_i @ T_i_j``, noise ``sigmas`` (x y z rx ry rz)."""
+        self._between(BetweenFactor, i, j, T_i_j, information_from_sigmas(sigmas), "odometry")
+
+    def append(self, T_last_new: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> int:
+        """Chain a new node after the last one, ``T_last_new`` from it (like ``addRelativePose`` without ids);
+        returns its id."""
         if self.num_nodes == 0:
             raise SlamError("the pose graph is empty: add the first node with add_node() before chaining")
-        step = check_pose(relative_pose, "the odometry step")
+        step = check_pose(T_last_new, "the odometry step")
         j = self.add_node(self._poses[-1] @ step)
         self.add_odometry(j - 1, j, step, sigmas)
         return j
 
-    def add_loop(self, i: int, j: int, relative_pose: np.ndarray, information=None) -> int:
-        """A loop edge ``pose_j = pose_i @ relative_pose``; returns its index among loop edges.
+    def add_loop(self, i: int, j: int, T_i_j: np.ndarray, information=None) -> int:
+        """A loop edge ``pose_j = pose_i @ T_i_j``; returns its index among loop edges.
 
         ``information`` is a symmetric positive-definite 6 x 6 matrix in the
         reference's order x y z rx ry rz (identity when not given, as in the
         reference); it is permuted to GTSAM's rotation-first order inside.
         """
-        info = LOOP_INFORMATION if information is None else _check_information(information)
-        self._loops.append(self._edge(i, j, relative_pose, info, "loop"))
-        return len(self._loops) - 1
+        info = LOOP_INFORMATION if information is None else check_information(information)
+        self._between(LoopFactor, i, j, T_i_j, info, "loop")
+        return len(self._loops()) - 1
 
     def loop_pairs(self) -> list[tuple[int, int]]:
         """The (i, j) node pairs of the loop edges, in the order they were added."""
-        return [(e.i, e.j) for e in self._loops]
+        return [(f.i, f.j) for f in self._loops()]
 
     # -- optimising ---------------------------------------------------------
     def optimize(
@@ -156,34 +157,32 @@ class PoseGraph:
         anchor (identity when not given). ``loop_kernel`` wraps every loop edge
         in a robust kernel: ``"none"`` (the reference: every loop is trusted),
         ``"huber"`` or ``"cauchy"``, with ``kernel_scale`` in sigmas (default
-        :data:`KERNEL_SCALES`). Odometry edges and the prior are never robust.
+        :data:`KERNEL_SCALES`). Other factors are never robust.
         """
         if self.num_nodes == 0:
             raise SlamError("the pose graph is empty: there is nothing to optimise")
         anchor = np.eye(4) if anchor_pose is None else check_pose(anchor_pose, "the anchor pose")
         if int(max_iterations) != max_iterations or max_iterations < 1:
             raise SlamError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-        loop_noise = _loop_noise_factory(loop_kernel, kernel_scale)
+        context = FactorContext(loop_noise=loop_noise_factory(loop_kernel, kernel_scale))
         self._check_connected()
 
         # 1. graph, with the prior holding the first node at the anchor
         graph = gtsam.NonlinearFactorGraph()
-        prior_noise = gtsam.noiseModel.Diagonal.Sigmas(PRIOR_SIGMAS[_TO_GTSAM])
-        graph.add(gtsam.PriorFactorPose3(0, _pose3(anchor), prior_noise))
-        # 2. odometry edges
-        for e in self._odometry:
-            graph.add(gtsam.BetweenFactorPose3(e.i, e.j, _pose3(e.relative), _gaussian(e.information)))
-        # 3. loop edges
+        graph.add(PriorFactor(0, anchor).to_gtsam(context))
+        # 2. every factor, in the order added (odometry edges, edges back, loops, ...)
         loop_factors = []
-        for e in self._loops:
-            loop_factors.append(gtsam.BetweenFactorPose3(e.i, e.j, _pose3(e.relative), loop_noise(e.information)))
-            graph.add(loop_factors[-1])
-        # 4. initial values, moved so that node 0 is at the anchor
+        for factor in self.factors:
+            added = factor.to_gtsam(context)
+            graph.add(added)
+            if isinstance(factor, LoopFactor):
+                loop_factors.append(added)
+        # 3. initial values, moved so that node 0 is at the anchor
         start = anchor @ np.linalg.inv(self._poses[0]) @ self.initial_poses
         initial = gtsam.Values()
         for k, pose in enumerate(start):
-            initial.insert(k, _pose3(pose))
-        # 5. optimise
+            initial.insert(k, pose3(pose))
+        # 4. optimise
         params = gtsam.LevenbergMarquardtParams()
         params.setMaxIterations(max_iterations)
         optimizer = gtsam.LevenbergMarquardtOptimizer(graph, initial, params)
@@ -193,10 +192,10 @@ class PoseGraph:
             raise SlamError(f"GTSAM could not optimise the pose graph: {exc}") from None
         before, after = graph.error(initial), graph.error(result)
         log.info(
-            "pose graph: %d nodes, %d odometry and %d loop edges (kernel %s); error %.6g -> %.6g in %d iterations",
+            "pose graph: %d nodes, %d factors, %d of them loop edges (kernel %s); error %.6g -> %.6g in %d iterations",
             self.num_nodes,
-            len(self._odometry),
-            len(self._loops),
+            len(self.factors),
+            len(loop_factors),
             loop_kernel,
             before,
             after,
@@ -206,62 +205,24 @@ class PoseGraph:
         report = _loop_report(loop_factors, result)
         return OptimizationResult(poses, start, before, after, optimizer.iterations(), *report)
 
+    def _loops(self) -> list[LoopFactor]:
+        return [f for f in self.factors if isinstance(f, LoopFactor)]
+
+    def _between(self, kind, i, j, T_i_j, information, name: str) -> None:
+        for k in (i, j):
+            if not isinstance(k, (int, np.integer)) or not 0 <= k < self.num_nodes:
+                raise SlamError(f"{name} edge ({i}, {j}): node {k} does not exist (the graph has {self.num_nodes})")
+        if i == j:
+            raise SlamError(f"{name} edge ({i}, {j}) joins a node to itself")
+        self.factors.append(kind(int(i), int(j), check_pose(T_i_j, f"the {name} edge ({i}, {j})"), information))
+
     def _check_connected(self) -> None:
-        edges = np.array([(e.i, e.j) for e in self._odometry + self._loops], dtype=int).reshape(-1, 2)
+        edges = np.array([f.nodes for f in self.factors if len(f.nodes) == 2], dtype=int).reshape(-1, 2)
         links = coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(self.num_nodes,) * 2)
         _, label = connected_components(links, directed=False)
         loose = np.flatnonzero(label != label[0])
         if loose.size:
             raise SlamError(f"node(s) {loose[:10].tolist()} are linked to node 0 by no chain of edges")
-
-    def _edge(self, i: int, j: int, relative_pose, information: np.ndarray, kind: str) -> _Edge:
-        for k in (i, j):
-            if not isinstance(k, (int, np.integer)) or not 0 <= k < self.num_nodes:
-                raise SlamError(f"{kind} edge ({i}, {j}): node {k} does not exist (the graph has {self.num_nodes})")
-        if i == j:
-            raise SlamError(f"{kind} edge ({i}, {j}) joins a node to itself")
-        return _Edge(int(i), int(j), check_pose(relative_pose, f"the {kind} edge ({i}, {j})"), information)
-
-
-def information_from_sigmas(sigmas) -> np.ndarray:
-    """The diagonal 6 x 6 information matrix of independent sigmas (x y z in m, rx ry rz in rad)."""
-    sigmas = np.asarray(sigmas, dtype=float)
-    if sigmas.shape != (6,) or not np.all(np.isfinite(sigmas)) or np.any(sigmas <= 0):
-        raise SlamError(f"sigmas must be 6 positive numbers (x y z rx ry rz), got {sigmas}")
-    return np.diag(sigmas**-2.0)
-
-
-# -- checks and conversions -------------------------------------------------
-def _check_information(information) -> np.ndarray:
-    info = np.asarray(information, dtype=float)
-    if info.shape != (6, 6) or not np.all(np.isfinite(info)):
-        raise SlamError(f"the information matrix must be a finite 6 x 6 matrix, got shape {info.shape}")
-    if not np.allclose(info, info.T, rtol=1e-9, atol=1e-12 * np.abs(info).max()):
-        raise SlamError("the information matrix must be symmetric")
-    if np.linalg.eigvalsh(info).min() <= 0:
-        raise SlamError("the information matrix must be positive definite (all eigenvalues > 0)")
-    return info
-
-
-def _pose3(pose: np.ndarray) -> gtsam.Pose3:
-    return gtsam.Pose3(gtsam.Rot3.ClosestTo(pose[:3, :3]), pose[:3, 3].copy())
-
-
-def _gaussian(information: np.ndarray):
-    """Translation-first information -> GTSAM (rotation-first) Gaussian noise model."""
-    return gtsam.noiseModel.Gaussian.Information(information[np.ix_(_TO_GTSAM, _TO_GTSAM)])
-
-
-def _loop_noise_factory(kernel: str, scale: float | None):
-    if kernel not in LOOP_KERNELS:
-        raise SlamError(f"loop_kernel must be one of {', '.join(LOOP_KERNELS)}, got {kernel!r}")
-    if kernel == "none":
-        return _gaussian
-    scale = KERNEL_SCALES[kernel] if scale is None else float(scale)
-    if not (np.isfinite(scale) and scale > 0):
-        raise SlamError(f"kernel_scale must be a positive number of sigmas, got {scale}")
-    estimator = _ESTIMATORS[kernel].Create(scale)
-    return lambda information: gtsam.noiseModel.Robust.Create(estimator, _gaussian(information))
 
 
 def _loop_report(factors, values) -> tuple[np.ndarray, ...]:

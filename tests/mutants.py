@@ -34,9 +34,9 @@ MUTANTS = {
     ),
     "loop closure disabled": (
         "tests/test_pipeline.py",
-        "helpers/pipeline.py",
-        "        if len(submaps) > config.loop_closure.sub_map_thresh:\n",
-        "        if False:\n",
+        "helpers/loopclosure.py",
+        "        if len(self.submaps) <= self.settings.sub_map_thresh:\n",
+        "        if True:\n",
     ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",

@@ -6,11 +6,13 @@ import open3d as o3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import Config, LoopClosureConfig
+from helpers.config import Config, LoopClosureConfig, MapConfig
 from helpers.errors import SlamError
+from helpers.icp_service import IcpService
 from helpers.loopclosure import (
     LoopCandidates,
-    best_scan_match,
+    LoopCloser,
+    best_scan_registration,
     distance_flown_since,
     find_loop_candidates,
     icp_with,
@@ -37,7 +39,8 @@ class ScriptedIcp:
         self.rmse_by_cloud = rmse_by_cloud
         self.calls = []  # (cloud id, moving, init)
 
-    def __call__(self, moving, fixed, init):
+    def __call__(self, *, moving, fixed, T_fixed_moving, max_iterations=None):
+        init = T_fixed_moving
         cloud = int(fixed[0, 0])
         self.calls.append((cloud, moving, init))
         return init @ pose(t=(0, 0, 0.01 * cloud)), self.rmse_by_cloud.get(cloud, 0.1)
@@ -93,7 +96,7 @@ def test_at_most_three_attempts_nearest_first():
     found = search([[0, d, 0] for d in distances], icp)
     assert icp.ids == [3, 1, 5]  # 1 m, 2 m, 3 m
     np.testing.assert_array_equal(found.tried_ids, [3, 1, 5])  # the search records what it tried, in order
-    assert len(found.tried_rmse) == 3 and found.n_eligible == len(distances)
+    assert len(found.tried) == 3 and found.n_eligible == len(distances)
 
 
 def test_at_most_three_returned_sorted_by_rmse_below_threshold():
@@ -135,19 +138,23 @@ def test_growing_radius_finds_what_the_fixed_radius_misses():
     np.testing.assert_array_equal(found.ids, [0])
 
 
-def test_best_scan_match_keeps_the_lowest_rmse_below_threshold():
+def test_the_best_scan_match_is_the_lowest_rmse_and_a_loop_edge_below_threshold():
     scans = named_clouds(9)  # scans 0..8, submaps of 3
     poses = np.array([pose(t=(10.0 * k, 0, 0)) for k in range(9)])
     seen = pose(0.1, (11, 1, 0))  # the current scan's pose found against each submap
     candidates = LoopCandidates(np.array([2, 0]), np.array([0.1, 0.2]), np.array([seen, seen]))
     icp = ScriptedIcp({0: 0.5, 1: 0.2, 2: 0.4, 6: 0.3, 7: 0.25, 8: 0.9})
-    match = best_scan_match(SCAN, 20, candidates, scans, poses, 3, THRESHOLD, icp)
+    match = best_scan_registration(SCAN, 20, candidates, scans, poses, 3, icp)
     assert sorted(icp.ids) == [0, 1, 2, 6, 7, 8]
-    assert (match.i, match.j, match.rmse) == (1, 20, 0.2)
+    assert (match.i, match.j, match.surface_rmse) == (1, 20, 0.2)
     init = {c: i for c, _, i in icp.calls}
     np.testing.assert_allclose(init[1], np.linalg.inv(poses[1]) @ seen)
-    np.testing.assert_allclose(match.relative_pose, init[1] @ pose(t=(0, 0, 0.01)))
-    assert best_scan_match(SCAN, 20, candidates, scans, poses, 3, 0.2, ScriptedIcp(icp.rmse_by_cloud)) is None
+    np.testing.assert_allclose(match.relative, init[1] @ pose(t=(0, 0, 0.01)))
+    # the loop closer's acceptance: below rmse_threshold (strictly), and pinning the motion
+    assert LoopCloser(settings(0, rmse_threshold=THRESHOLD), MapConfig(), icp).accepts(match.surface_rmse, float("nan"))
+    assert not LoopCloser(settings(0, rmse_threshold=0.2), MapConfig(), icp).accepts(match.surface_rmse, float("nan"))
+    pinning = LoopCloser(settings(0, rmse_threshold=THRESHOLD, min_constraint=0.01), MapConfig(), icp)
+    assert pinning.accepts(match.surface_rmse, 0.01) and not pinning.accepts(match.surface_rmse, 0.009)
 
 
 def test_bad_inputs_raise_slam_error():
@@ -176,7 +183,8 @@ def scan_at(true_pose, rng, n=4000, half=15.0):
     return (world - true_pose[:3, 3]) @ true_pose[:3, :3]
 
 
-def open3d_icp(moving, fixed, init):
+def open3d_icp(*, moving, fixed, T_fixed_moving, max_iterations=None):
+    init = T_fixed_moving
     src, dst = (o3d.geometry.PointCloud(o3d.utility.Vector3dVector(p)) for p in (moving, fixed))
     dst.estimate_normals(o3d.geometry.KDTreeSearchParamKNN(20))
     estimation = o3d.pipelines.registration.TransformationEstimationPointToPlane()
@@ -200,10 +208,11 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     scan = scan_at(revisit, rng)
     found = find_loop_candidates(index.points, index.centres, scan, drifted, 1, icp_fn, settings(1))
     np.testing.assert_array_equal(found.ids, [0])
-    match = best_scan_match(scan, 6, found, scans, truth, 3, THRESHOLD, icp_fn)
+    match = best_scan_registration(scan, 6, found, scans, truth, 3, icp_fn, settings(1))
+    assert LoopCloser(settings(1), MapConfig(), icp_fn).accepts(match.surface_rmse, float("nan"))
     expected = np.linalg.inv(truth[match.i]) @ revisit  # pose_j = pose_i @ T_ij
-    assert np.linalg.norm(match.relative_pose[:3, 3] - expected[:3, 3]) < 0.1
-    assert Rotation.from_matrix(expected[:3, :3].T @ match.relative_pose[:3, :3]).magnitude() < np.radians(0.3)
+    assert np.linalg.norm(match.relative[:3, 3] - expected[:3, 3]) < 0.1
+    assert Rotation.from_matrix(expected[:3, :3].T @ match.relative[:3, :3]).magnitude() < np.radians(0.3)
     # and the pose graph reads the edge the same way: the loop pulls the drifted node back
     graph = PoseGraph()
     for p in truth:
@@ -211,7 +220,7 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     for k in range(1, 6):
         graph.add_odometry(k - 1, k, np.linalg.inv(truth[k - 1]) @ truth[k])
     graph.add_node(drifted)
-    graph.add_loop(match.i, 6, match.relative_pose)
+    graph.add_loop(match.i, 6, match.relative)
     moved = graph.optimize(anchor_pose=truth[0]).poses[6]
     assert np.linalg.norm(moved[:3, 3] - revisit[:3, 3]) < 0.1
 
@@ -224,7 +233,7 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
     from scipy.spatial import cKDTree
 
     from helpers.features import grid_average
-    from helpers.loopclosure import surface_rmse
+    from helpers.icp_service import surface_rmse
 
     moving, fixed = grid_average(default_dataset.scans[629], 0.75), grid_average(default_dataset.scans[0], 0.75)
     truth = np.linalg.inv(default_dataset.poses[0]) @ default_dataset.poses[629]
@@ -243,19 +252,19 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
 def test_icp_fn_keeps_only_the_recently_used_clouds_ready(monkeypatch):
     """Clouds are made ready once while recent, and at most PREPARED_CLOUDS are kept (memory on long flights)."""
     import helpers.icp
-    from helpers import loopclosure
+    from helpers import icp_service
 
     made = []
     real = helpers.icp.icp_cloud
     monkeypatch.setattr(helpers.icp, "icp_cloud", lambda points, *a: made.append(id(points)) or real(points, *a))
-    monkeypatch.setattr(loopclosure, "PREPARED_CLOUDS", 3)
+    monkeypatch.setattr(icp_service, "PREPARED_CLOUDS", 3)
     icp_fn = icp_with("plane-to-plane", 3.0, 5, 1e-3, "small_gicp")
     rng = np.random.default_rng(0)
     clouds = [scan_at(pose(0.0, (0.5 * k, 0.0, 50)), rng) for k in range(5)]
     for k in range(1, 5):  # a chain: each cloud is moving once and fixed once
-        icp_fn(clouds[k], clouds[k - 1], np.eye(4))
+        icp_fn(moving=clouds[k], fixed=clouds[k - 1], T_fixed_moving=np.eye(4))
     assert sorted(made) == sorted(id(c) for c in clouds)  # each made ready once
-    icp_fn(clouds[4], clouds[0], np.eye(4))  # cloud 0 was evicted: made ready again
+    icp_fn(moving=clouds[4], fixed=clouds[0], T_fixed_moving=np.eye(4))  # cloud 0 was evicted: made ready again
     assert made[-1] == id(clouds[0]) and len(made) == 6
 
 
@@ -264,8 +273,6 @@ def test_a_loop_on_ground_too_flat_to_pin_it_is_left_out(ground):
     """Over flat ground ICP slides to any offset with the same low RMSE: the
     best scan match fits but cannot be a loop edge. Over terrain the same
     revisit becomes the edge, at the true relative pose."""
-    from helpers.pipeline import _loop_icp, loop_query
-
     height = terrain if ground == "terrain" else (lambda x, y: np.zeros_like(x))
     rng = np.random.default_rng(5)
 
@@ -276,15 +283,15 @@ def test_a_loop_on_ground_too_flat_to_pin_it_is_left_out(ground):
 
     truth = [pose(0.4 * k, (2.0 * k, 1.0 * k, 50)) for k in range(6)]
     config = Config().with_values(loop_closure={"sub_map_thresh": 1})  # the revisit's own submap is the newest
-    icp, scans = _loop_icp(config), [scan(p) for p in truth]
-    index = SubmapIndex(config.map.n_scans_per_submap, config.map.align_grid_step)
-    for cloud, true_pose in zip(scans, truth, strict=True):
-        index.add_scan(cloud, true_pose)
+    closer, scans = LoopCloser(config.loop_closure, config.map, IcpService.from_config(config.registration)), []
+    for true_pose in truth:
+        scans.append(scan(true_pose))
+        closer.submaps.add_scan(scans[-1], true_pose)
     revisit = pose(2.0, (3.5, 1.5, 50))  # back over scans 1-2
     drifted = pose(2.0 + np.radians(2), (5.0, 0.5, 50.5))  # the odometry's guess
     cloud = scan(revisit)
-    index.add_scan(cloud, drifted)
-    query = loop_query(6, cloud, drifted, index, [*scans, cloud], [*truth, drifted], icp, config)
+    closer.submaps.add_scan(cloud, drifted)
+    query = closer.query(6, cloud, drifted, [*scans, cloud], [*truth, drifted])
     assert query.best_scan_rmse < config.loop_closure.rmse_threshold  # the match fits either way
     if ground == "flat":
         assert query.best_scan_constraint < config.loop_closure.min_constraint

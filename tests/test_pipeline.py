@@ -15,7 +15,7 @@ from helpers.configfile import config_to_toml
 from helpers.evaluation import grade_loops, run_metrics
 from helpers.health import assess
 from helpers.output import write_run
-from helpers.pipeline import Edge, build_pose_graph, run_slam
+from helpers.pipeline import Edge, Slam, build_pose_graph, run_slam
 from helpers.trajectory import read_tum
 from helpers.waypoints import loop_waypoints
 
@@ -112,11 +112,11 @@ def test_written_outputs(short_loop, short_run, tmp_path):
     assert (out / "map.ply").stat().st_size > 1000 and (out / "config.toml").is_file()
 
 
-def test_no_loop_possible_ends_with_odometry_only(short_loop):
-    """With no loop possible and no edges back, the graph is the odometry chain."""
-    result = run_slam(
-        short_loop, Config().with_values(loop_closure=dict(sub_map_thresh=1000), pose_graph=dict(edges_back=1))
-    )
+def test_no_loop_possible_ends_with_odometry_only(short_loop, short_run):
+    """With no loop possible and no edges back, the graph is the odometry chain
+    (the fixture's odometry reused: only the back end runs again)."""
+    config = Config().with_values(loop_closure=dict(sub_map_thresh=1000), pose_graph=dict(edges_back=1))
+    result = run_slam(short_loop, config, odometry=short_run.odometry)
     m = run_metrics(short_loop, result)
     assert m["n_loop_closures"] == 0 and result.queries == [] and result.extra_edges == []
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
@@ -179,9 +179,11 @@ def _transform_z(yaw_deg, shift):
     return out
 
 
-def test_a_revisit_that_closes_no_loop_is_not_trusted(short_loop):
-    """The same loop with loop candidates required to be older than the whole flight."""
-    result = run_slam(short_loop, Config().with_values(loop_closure=dict(sub_map_thresh=1000)))
+def test_a_revisit_that_closes_no_loop_is_not_trusted(short_loop, short_run):
+    """The same loop with loop candidates required to be older than the whole flight
+    (the fixture's odometry reused: only the back end runs again)."""
+    config = Config().with_values(loop_closure=dict(sub_map_thresh=1000))
+    result = run_slam(short_loop, config, odometry=short_run.odometry)
     health = assess(result)
     assert result.loops == [] and health.counts["n_revisits_unclosed"] == health.counts["n_revisits"] > 0
     assert not health.trusted and "sub_map_thresh" in health.warning()
@@ -208,8 +210,54 @@ def test_an_edge_spanning_k_steps_has_k_times_the_sigmas(weights, expected_x):
     weights (the reference's identity) at 2.2 m."""
     odometry = SimpleNamespace(poses=np.stack([_shift(0.0), _shift(1.0), _shift(2.0)]), relative=[_shift(1.0)] * 2)
     graph = build_pose_graph(
-        odometry, [Edge(0, 2, _shift(2.3), rmse=0.1)], [], Config().with_values(pose_graph=dict(graph_weights=weights))
+        odometry,
+        [Edge(0, 2, _shift(2.3), surface_rmse=0.1)],
+        [],
+        Config().with_values(pose_graph=dict(graph_weights=weights)),
     )
     poses = graph.optimize().poses
     assert poses[2][0, 3] == pytest.approx(expected_x, abs=1e-6)
     assert poses[1][0, 3] == pytest.approx(expected_x / 2, abs=1e-6)
+
+
+def test_slam_driven_scan_by_scan_from_a_given_odometry_is_the_same_run(short_loop, short_run):
+    """The main loop by hand, on the fixture's odometry (the back-end entry point): every step says what
+    happened, skipped scans do nothing, and the result is the fixture's run."""
+    slam = Slam(SHORT, anchor=short_loop.poses[0], odometry=short_run.odometry)
+    steps = [slam.process(scan, index) for index, scan in enumerate(short_loop.scans)]
+    again = slam.result(n_scans=len(short_loop))
+    accepted = [step for step in steps if step.accepted]
+    assert [step.index for step in accepted] == short_run.indices.tolist()
+    assert [step.node for step in accepted] == list(range(len(short_run.indices)))
+    assert [(s.loop.i, s.loop.j) for s in accepted if s.loop] == [(e.i, e.j) for e in short_run.loops]
+    assert sum(len(s.edges_back) for s in accepted) == len(short_run.extra_edges)
+    assert "\n" not in repr(accepted[-1]) and f"node {accepted[-1].node}" in repr(accepted[-1])
+    assert repr(steps[1]) == "Step(scan 1: skipped)"
+    assert again.odometry is short_run.odometry
+    assert [(e.i, e.j) for e in again.extra_edges] == [(e.i, e.j) for e in short_run.extra_edges]
+    np.testing.assert_allclose(again.poses_optimized, short_run.poses_optimized, atol=1e-9)
+    np.testing.assert_allclose(again.map_points, short_run.map_points, atol=1e-9)
+    with pytest.raises(helpers.SlamError, match="in order"):
+        slam.process(short_loop.scans[0], 0)
+
+
+def test_each_scan_is_downsampled_and_made_ready_for_icp_once(flight_over, monkeypatch):
+    """One scan, one preparation: every accepted scan is grid-averaged once on each grid (features, ICP)
+    and its ICP cloud made ready once, then shared by the odometry and the edges back."""
+    import helpers.frames
+    import helpers.icp
+
+    flight = flight_over(slice(0, 24))  # 8 accepted scans: each one is the fixed cloud of 3 later registrations
+    prepared, averaged = [], []
+    for module in (helpers.frames, helpers.icp):
+        real = module.icp_cloud
+        monkeypatch.setattr(
+            module, "icp_cloud", lambda points, *a, real=real: prepared.append(id(points)) or real(points, *a)
+        )
+    real_average = helpers.frames.grid_average
+    monkeypatch.setattr(helpers.frames, "grid_average", lambda p, step: averaged.append(step) or real_average(p, step))
+    result = run_slam(flight)
+    assert len(result.indices) == 8 and result.edges_back_tried > 0
+    assert sorted(prepared) == sorted(id(cloud) for cloud in result.clouds)  # each cloud once, and no other
+    config = result.config
+    assert sorted(averaged) == sorted([config.features.grid_step, config.registration.icp_grid_step] * 8)

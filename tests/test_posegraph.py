@@ -194,3 +194,42 @@ def test_bad_inputs_raise_slam_error():
     graph.add_node(np.eye(4))  # joined by no edge
     with pytest.raises(SlamError, match="no chain"):
         graph.optimize()
+
+
+class PositionFix:
+    """A factor kind the package does not have, defined here: a GNSS-like fix of one node's position
+    (gtsam.GPSFactor), isotropic ``sigma_m``. It only has to name its nodes and add itself to GTSAM."""
+
+    def __init__(self, node: int, position, sigma_m: float):
+        self.node, self.position, self.sigma_m = node, np.asarray(position, float), sigma_m
+
+    @property
+    def nodes(self):
+        return (self.node,)
+
+    def to_gtsam(self, context):
+        import gtsam
+
+        return gtsam.GPSFactor(self.node, self.position, gtsam.noiseModel.Isotropic.Sigma(3, self.sigma_m))
+
+
+def test_a_new_factor_kind_is_honoured_without_editing_the_graph():
+    """Noisy odometry drifts the end of an open chain (no loop); position fixes on every fourth node,
+    a factor kind defined in this test, pull the chain back onto the truth, and a fix that disagrees
+    moves its node to it."""
+    truth = ring()[: RING_NODES // 2]
+    graph = noisy_ring_graph(truth)
+    drifted = graph.optimize(anchor_pose=truth[0])
+    for k in range(4, len(truth), 4):
+        graph.add_factor(PositionFix(k, truth[k][:3, 3], sigma_m=0.05))
+    fixed = graph.optimize(anchor_pose=truth[0])
+    assert ate(drifted.poses, truth) > 0.5
+    assert ate(fixed.poses, truth) < 0.5 * ate(drifted.poses, truth)
+    fixes = list(range(4, len(truth), 4))
+    assert np.linalg.norm(fixed.poses[fixes, :3, 3] - truth[fixes, :3, 3], axis=1).max() < 0.15
+    # a fix 5 m off the truth, much stiffer than the odometry, moves its node there
+    graph.add_factor(PositionFix(len(truth) - 1, truth[-1][:3, 3] + [5.0, 0, 0], sigma_m=0.001))
+    pulled = graph.optimize(anchor_pose=truth[0]).poses[-1]
+    np.testing.assert_allclose(pulled[:3, 3], truth[-1][:3, 3] + [5.0, 0, 0], atol=0.01)
+    with pytest.raises(SlamError, match="does not exist"):
+        graph.add_factor(PositionFix(len(truth), truth[0][:3, 3], 1.0))

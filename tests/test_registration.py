@@ -8,9 +8,14 @@ from helpers.errors import SlamError
 from helpers.icp import icp_cloud, icp_rmse, refine_icp
 from helpers.registration import _trials_needed, estimate_rigid_msac, kabsch
 
-ICP = (30, 1e-6)  # iterations at most, and a tight tolerance: these tests want ICP converged
+ICP = {"max_iterations": 30, "tolerance": 1e-6}  # a tight tolerance: these tests want ICP converged
 BACKENDS = ["small_gicp", "open3d"]
 WAYPOINT_ROWS = slice(60, 110)  # a straight stretch and the start of a 90-degree turn of the default loop
+
+
+def keywords(metric, backend, **changed):
+    """refine_icp's settings: an inlier distance of 3 m and :data:`ICP`, with ``changed`` applied."""
+    return {"metric": metric, "backend": backend, "inlier_distance": 3.0, **ICP, **changed}
 
 
 @pytest.fixture(scope="module")
@@ -141,7 +146,7 @@ def test_msac_refuses_too_few_matches_and_pure_noise():
 def test_icp_metrics_agree_on_an_easy_case(flight, metric, backend):
     scan = flight.scans[10]
     truth = _transform(1.0, [0.8, -0.5, 0.2])
-    T, rmse = refine_icp(scan, _apply(truth, scan), np.eye(4), metric, 3.0, *ICP, backend)
+    T, rmse = refine_icp(scan, _apply(truth, scan), np.eye(4), **keywords(metric, backend))
     dt, dr = _errors(T, truth)
     assert dt < 0.05 and dr < 0.02
     assert rmse < 0.05  # the same points: the residual vanishes whatever the metric
@@ -153,9 +158,9 @@ def test_icp_on_prepared_clouds_equals_icp_on_bare_points(flight, metric, backen
     # Normals and covariances made once (what the odometry reuses) give what ICP computes itself.
     moving, fixed = flight.scans[13], flight.scans[10]
     init = np.linalg.inv(flight.poses[10]) @ flight.poses[13] @ _transform(0.3, [0.5, -0.4, 0.1])
-    T_bare, rmse_bare = refine_icp(moving, fixed, init, metric, 3.0, *ICP, backend)
+    T_bare, rmse_bare = refine_icp(moving, fixed, init, **keywords(metric, backend))
     ready = icp_cloud(moving, metric, backend), icp_cloud(fixed, metric, backend)
-    T_ready, rmse_ready = refine_icp(*ready, init, metric, 3.0, *ICP, backend)
+    T_ready, rmse_ready = refine_icp(*ready, init, **keywords(metric, backend))
     np.testing.assert_allclose(T_ready, T_bare, atol=1e-9)
     assert rmse_ready == pytest.approx(rmse_bare, abs=1e-9)
     # The RMSE reported is the point-to-point RMSE of the returned transform, whatever the back end.
@@ -169,7 +174,7 @@ def test_both_icp_back_ends_land_on_the_true_motion(flight, metric):
     moving, fixed = flight.scans[13], flight.scans[10]
     truth = np.linalg.inv(flight.poses[10]) @ flight.poses[13]
     init = truth @ _transform(0.3, [0.5, -0.3, 0.1])
-    ends = [refine_icp(moving, fixed, init, metric, 3.0, 30, 1e-3, backend)[0] for backend in BACKENDS]
+    ends = [refine_icp(moving, fixed, init, **keywords(metric, backend, tolerance=1e-3))[0] for backend in BACKENDS]
     errors = [_displacement(T, truth, moving) for T in ends]
     assert max(errors) < 0.2, errors
 
@@ -178,8 +183,8 @@ def test_icp_tolerance_in_metres_stops_early_but_lands_nearby(flight):
     moving, fixed = (icp_cloud(flight.scans[k], "plane-to-plane", "open3d") for k in (13, 10))
     truth = np.linalg.inv(flight.poses[10]) @ flight.poses[13]
     init = truth @ _transform(0.5, [1.0, -0.8, 0.2])
-    T_tight, _ = refine_icp(moving, fixed, init, "plane-to-plane", 3.0, 30, 1e-6, "open3d")
-    T_loose, _ = refine_icp(moving, fixed, init, "plane-to-plane", 3.0, 30, 1e-3, "open3d")
+    T_tight, _ = refine_icp(moving, fixed, init, **keywords("plane-to-plane", "open3d", tolerance=1e-6))
+    T_loose, _ = refine_icp(moving, fixed, init, **keywords("plane-to-plane", "open3d", tolerance=1e-3))
     assert _displacement(T_loose, T_tight, flight.scans[13]) < 0.02
 
 
@@ -187,25 +192,25 @@ def test_icp_refuses_a_cloud_prepared_for_another_metric(flight):
     scan = flight.scans[0]
     with pytest.raises(SlamError, match="prepared for point-to-point"):
         refine_icp(
-            icp_cloud(scan, "point-to-point", "small_gicp"), scan, np.eye(4), "plane-to-plane", 3.0, *ICP, "small_gicp"
+            icp_cloud(scan, "point-to-point", "small_gicp"), scan, np.eye(4), **keywords("plane-to-plane", "small_gicp")
         )
     with pytest.raises(SlamError, match="tolerance"):
-        refine_icp(scan, scan, np.eye(4), "point-to-point", 3.0, 30, -1.0, "small_gicp")
+        refine_icp(scan, scan, np.eye(4), **keywords("point-to-point", "small_gicp", tolerance=-1.0))
 
 
 def test_icp_refuses_bad_input(flight):
     scan = flight.scans[0]
     with pytest.raises(SlamError, match="metric"):
-        refine_icp(scan, scan, np.eye(4), "plane-to-point", 3.0, *ICP, "small_gicp")
+        refine_icp(scan, scan, np.eye(4), **keywords("plane-to-point", "small_gicp"))
     with pytest.raises(SlamError, match="4 x 4"):
-        refine_icp(scan, scan, np.eye(3), "point-to-point", 3.0, *ICP, "small_gicp")
+        refine_icp(scan, scan, np.eye(3), **keywords("point-to-point", "small_gicp"))
     with pytest.raises(SlamError, match="points"):
-        refine_icp(np.zeros((0, 3)), scan, np.eye(4), "point-to-point", 3.0, *ICP, "small_gicp")
+        refine_icp(np.zeros((0, 3)), scan, np.eye(4), **keywords("point-to-point", "small_gicp"))
     with pytest.raises(SlamError, match="unknown ICP back end 'pcl'"):
-        refine_icp(scan, scan, np.eye(4), "point-to-point", 3.0, *ICP, "pcl")
+        refine_icp(scan, scan, np.eye(4), **keywords("point-to-point", "pcl"))
     open3d_cloud = icp_cloud(scan, "plane-to-plane", "open3d")
     with pytest.raises(SlamError, match="prepared for plane-to-plane ICP on open3d"):
-        refine_icp(open3d_cloud, scan, np.eye(4), "plane-to-plane", 3.0, *ICP, "small_gicp")
+        refine_icp(open3d_cloud, scan, np.eye(4), **keywords("plane-to-plane", "small_gicp"))
 
 
 @pytest.mark.parametrize(

@@ -11,8 +11,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..errors import SlamError
-from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
-from ..geometry import relative_pose_error
+from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M, is_false_loop, loop_error
 from . import report, unanswered
 
 
@@ -39,10 +38,9 @@ def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
 
 def loop_edge_error(poses_gt, edge) -> tuple[float, float]:
     """How far a loop edge (``i``, ``j``, ``relative``) is from the true
-    relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg)."""
-    truth = np.linalg.inv(poses_gt[edge.i]) @ poses_gt[edge.j]
-    error_m, error_deg = relative_pose_error(truth, edge.relative)
-    return float(error_m), float(error_deg)
+    relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg),
+    as :func:`helpers.evaluation.loop_error` grades it."""
+    return loop_error(poses_gt, edge)
 
 
 def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
@@ -58,7 +56,7 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
             "the error transform is inv(true relative pose) @ edge.relative, with the true relative pose "
             "inv(poses_gt[i]) @ poses_gt[j]; its translation's length and its rotation angle are the errors",
         )
-    false = true_m > FALSE_LOOP_M or true_deg > FALSE_LOOP_DEG
+    false = is_false_loop(true_m, true_deg)
     if bool(is_false) != false:
         return report(False, "", f"an edge is false beyond {FALSE_LOOP_M:g} m OR beyond {FALSE_LOOP_DEG:g} deg")
     limits = f"{FALSE_LOOP_M:g} m and {FALSE_LOOP_DEG:g} deg"
@@ -70,19 +68,18 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
 def fixed_radius_loops(result, end: int) -> list[int]:
     """The nodes 0 .. ``end`` of ``result`` that close a loop when the
     search radius does not grow (``loop_search_growth = 0``, the reference's
-    fixed radius): the pipeline's own loop (:func:`helpers.pipeline.submaps_and_loops`)
-    run again on the run's scans and odometry poses."""
-    from ..loopclosure import icp_with
-    from ..pipeline import submaps_and_loops
+    fixed radius): the pipeline's own loop closer run again on the run's
+    scans and odometry poses."""
+    from ..icp_service import IcpService
+    from ..loopclosure import LoopCloser
 
     config = result.config
-    fixed = replace(config, loop_closure=replace(config.loop_closure, loop_search_growth=0.0))
-    fit = config.registration
-    icp = icp_with(
-        fit.metric, fit.inlier_distance, fixed.loop_closure.icp_max_iterations, fit.icp_tolerance, fit.icp_backend
-    )
-    _, queries = submaps_and_loops(result.clouds[: end + 1], result.poses_odometry[: end + 1], fixed, icp)
-    return [q.closure.j for q in queries if q.closure is not None]
+    fixed = replace(config.loop_closure, loop_search_growth=0.0)
+    loops = LoopCloser(fixed, config.map, IcpService.from_config(config.registration))
+    clouds, poses = result.clouds[: end + 1], result.poses_odometry[: end + 1]
+    for node, (cloud, pose) in enumerate(zip(clouds, poses, strict=True)):
+        loops.add(node, cloud, pose, clouds, poses)
+    return [loop.j for loop in loops.loops]
 
 
 def check_fixed_radius(result, end: int, nodes) -> bool:

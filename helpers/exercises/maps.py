@@ -10,6 +10,7 @@ import numpy as np
 
 from ..evaluation import map_errors
 from ..metrics import ate
+from ..registration import kabsch
 from . import report, unanswered
 
 ATE_TOLERANCE_M = 1e-3  # an aligned ATE this close to the check's is right
@@ -24,13 +25,10 @@ def positions(trajectory) -> np.ndarray:
 
 def rigid_fit(moving, fixed) -> tuple[np.ndarray, np.ndarray]:
     """The rotation R and translation t that bring the (N, 3) points ``moving``
-    closest to ``fixed`` in the least-squares sense (Kabsch, by SVD, no scale)."""
-    moving, fixed = positions(moving), positions(fixed)
-    mc, fc = moving.mean(axis=0), fixed.mean(axis=0)
-    u, _, vt = np.linalg.svd((moving - mc).T @ (fixed - fc))
-    flip = np.diag([1.0, 1.0, np.sign(np.linalg.det(vt.T @ u.T))])  # a rotation, never a mirror
-    rotation = vt.T @ flip @ u.T
-    return rotation, fc - rotation @ mc
+    closest to ``fixed`` in the least-squares sense (the package's Kabsch,
+    :func:`helpers.registration.kabsch`: by SVD, no scale, never a mirror)."""
+    T_fixed_moving = kabsch(positions(moving), positions(fixed))
+    return T_fixed_moving[:3, :3], T_fixed_moving[:3, 3]
 
 
 def aligned_ate(estimated, ground_truth) -> float:

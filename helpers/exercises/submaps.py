@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..loopclosure import find_loop_candidates
+from .. import loopclosure as loop_rules
 from . import report, unanswered
 
 
@@ -41,24 +41,11 @@ def check_centre_and_reach(result, submap_id: int, centre, reach) -> bool:
 
 
 def eligible_submaps(result, node: int, sub_map_thresh: int) -> np.ndarray:
-    """The submaps a loop query at ``node`` may search, as
-    :func:`helpers.loopclosure.find_loop_candidates` decides (asked with an
-    ICP that is never called: the search radius is made empty)."""
+    """The submaps a loop query at ``node`` may search, by the loop closer's
+    own rule (:func:`helpers.loopclosure.eligible_submaps`)."""
     built = [s for s in result.submaps.submaps if s.scan_ids[-1] <= node]  # the submaps that exist at ``node``
-    if not built:
-        return np.zeros(0, int)
-    nowhere = {"loop_closure_search_radius": 1e-9, "loop_search_growth": 0.0}  # eligibility only, no search
-    settings = replace(result.config.loop_closure, sub_map_thresh=sub_map_thresh, **nowhere)
-    found = find_loop_candidates(
-        [s.points for s in built],
-        np.array([s.centre for s in built]),
-        result.clouds[node],
-        result.poses_odometry[node],
-        current_submap_id=len(built) - 1,
-        icp_fn=lambda moving, fixed, init: (init, float("inf")),
-        settings=settings,
-    )
-    return np.arange(found.n_eligible)
+    settings = replace(result.config.loop_closure, sub_map_thresh=sub_map_thresh)
+    return np.arange(loop_rules.eligible_submaps(len(built), settings))
 
 
 def check_eligible(result, node: int, sub_map_thresh: int, eligible) -> bool:

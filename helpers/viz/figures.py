@@ -18,11 +18,10 @@ from .loop_figures import (
     loop_errors_figure,
     pair_overlay_figure,
     queries_figure,
-    query_search,
-    revisits,
     rmse_offsets_figure,
     search_radius_figure,
 )
+from .loop_search import query_search, revisits
 from .style import WINDOW
 from .submap_figures import recent_rule_figure, submap_centres_figure, submap_merge_figure, submap_panels
 

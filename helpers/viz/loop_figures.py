@@ -6,11 +6,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
 
-from ..errors import SlamError
 from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
 from ..geometry import transform_points
-from ..loopclosure import distance_flown_since
-from ..submaps import centre_scan_id
 from .style import COLORS, GREY, LIGHT, grid, xy_of
 
 
@@ -95,59 +92,6 @@ def candidates_figure(
     grid(ax)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     return fig
-
-
-def query_search(result, node: int, poses_gt) -> dict:
-    """What the loop query of ``node`` saw, as the pipeline recorded it
-    (:class:`helpers.pipeline.LoopQuery`): the submap centres that existed
-    then (odometry frame), how many were eligible, each one's grown search
-    radius, the submaps registered by ICP (nearest first) and those matched;
-    with the scan's odometry and true positions (``poses_gt``: (K, 4, 4), the
-    true poses of the nodes, e.g. ``dataset.poses[result.indices]``)."""
-    query = next((q for q in result.queries if q.node == node), None)
-    if query is None:
-        raise SlamError(f"node {node} registered no old submap: it has no loop query")
-    centres = result.submaps.centres[: query.n_submaps]
-    position = result.poses_odometry[node][:3, 3]
-    true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in result.submaps.submaps])
-    return {
-        "centres": centres,
-        "true_centres": true_centres[: query.n_submaps],
-        "n_eligible": query.n_eligible,
-        "radius": query.radius,
-        "distance": np.linalg.norm(centres[: query.n_eligible] - position, axis=1),
-        "tried": query.tried_ids,
-        "matched": np.asarray(query.submap_ids, int),
-        "position": position,
-        "true_position": poses_gt[node][:3, 3],
-    }
-
-
-def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
-    """Every node that truly flies over an eligible old submap (true centre
-    within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
-    the nodes): the distance flown since that submap, how far away it looks on
-    the odometry, and whether the node closed a loop."""
-    n = result.config.map.n_scans_per_submap
-    subs = result.submaps.submaps
-    true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
-    closed = {loop.j for loop in result.loops}
-    rows = []
-    for node in range(len(result.indices)):
-        count = (node + 1) // n
-        n_eligible = count - result.config.loop_closure.sub_map_thresh
-        if n_eligible <= 0:
-            continue
-        true_distance = np.linalg.norm(true_centres[:n_eligible] - poses_gt[node][:3, 3], axis=1)
-        k = int(np.argmin(true_distance))
-        if true_distance[k] > max_true_distance:
-            continue
-        position = result.poses_odometry[node][:3, 3]
-        flown = distance_flown_since(result.submaps.centres[:count], position)[k]
-        apparent = np.linalg.norm(result.submaps.centres[k] - position)
-        rows.append((node, flown, apparent, node in closed))
-    nodes, flown, apparent, found = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 4
-    return {"nodes": nodes, "flown": flown, "apparent": apparent, "closed": np.asarray(found, bool)}
 
 
 def search_radius_figure(flown, apparent, found, base_radius: float, growth: float):

@@ -1,0 +1,220 @@
+"""One scan prepared for registration, and one pair of scans registered (stage 3c).
+
+:func:`prepare` downsamples a scan on the feature grid and on the ICP grid
+(once each), describes it (FPFH, :func:`describe`) and makes its ICP cloud
+ready (normals and generalized-ICP covariances); that preparation serves
+twice, as the moving scan of one pair and the fixed scan of the next.
+:func:`register_frames` matches descriptors, fits a rigid transform robustly
+(MSAC) and refines it by ICP; :func:`track_frames` runs ICP alone from the
+last motion. The ICP stops when an iteration changes its RMSE by less than
+``[registration] icp_tolerance`` metres and its inlier fraction by less than
+that fraction (a tighter criterion sometimes oscillates by a few inliers
+until the iteration cap); ``benchmarks/bench_registration.py`` measures what
+this tolerance costs and changes.
+
+A registration returns ``T_fine``, the transform ``T_fixed_moving`` that
+carries the moving scan into the fixed scan's frame.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .config import Config, RegistrationConfig
+from .errors import SlamError
+from .features import grid_average, keypoint_fpfh, match_features
+from .geometry import check_points, rotation_angle_deg
+from .icp import IcpCloud, icp_cloud, pairing
+from .icp_service import IcpService
+from .registration import estimate_rigid_msac
+
+STAGES = ("downsample", "fpfh", "match", "msac", "icp")
+
+
+@dataclass
+class Frame:
+    """One scan, prepared for registration."""
+
+    points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
+    features: np.ndarray | None  # (K, 33) normalised FPFH descriptors of the keypoints (None until :func:`describe`)
+    icp_points: np.ndarray  # (M, 3) the cloud ICP works on
+    timings: dict  # ms per preparation stage
+    icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
+    keypoints: np.ndarray | None = None  # (K,) indices of the points that have descriptors (None: all)
+
+
+@dataclass
+class PairRegistration:
+    """Everything one scan-to-scan registration produced (moving -> fixed)."""
+
+    moving: np.ndarray  # (N, 3) downsampled moving scan
+    fixed: np.ndarray  # (M, 3) downsampled fixed scan
+    matches: np.ndarray  # (K, 2) index pairs (moving, fixed)
+    inliers: np.ndarray  # (K,) bool, matches the robust fit kept
+    T_coarse: np.ndarray  # 4 x 4, robust fit (or the fallback guess)
+    T_fine: np.ndarray  # 4 x 4, after ICP
+    rmse: float  # m, ICP inlier RMSE
+    timings: dict  # ms per stage
+    fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
+    tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
+    constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
+
+
+def prepare(scan: np.ndarray, config: Config) -> Frame:
+    """Downsample one scan, describe it (not yet in tracking mode: see
+    :func:`describe`) and make its ICP cloud ready.
+
+    ``timings`` has the ms of ``downsample``, ``fpfh`` and ``icp`` (the ICP
+    cloud's normals, covariances and k-d tree, paid once per scan).
+    """
+    registration = config.registration
+    timings = {}
+    start = time.perf_counter()
+    points = grid_average(scan, config.features.grid_step)
+    icp_step = registration.icp_grid_step
+    icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
+    timings["downsample"] = _ms(start)
+    start = time.perf_counter()
+    icp = icp_cloud(icp_points, registration.metric, registration.icp_backend)
+    timings["icp"] = _ms(start)
+    frame = Frame(points, None, icp_points, timings, icp)
+    return frame if registration.mode == "tracking" else describe(frame, config)
+
+
+def describe(frame: Frame, config: Config) -> Frame:
+    """Give ``frame`` its FPFH descriptors and keypoints, once."""
+    if frame.features is None:
+        start = time.perf_counter()
+        frame.keypoints, frame.features = keypoint_fpfh(
+            frame.points, config.features.neighbors, config.features.keypoint_share
+        )
+        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
+    return frame
+
+
+def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray, icp: IcpService | None = None):
+    """Register ``moving`` onto ``fixed`` by ICP alone, from the last ``motion``
+    (a constant-velocity guess). Returns the registration and, when it cannot
+    be trusted, why: an ICP RMSE above ``icp_fallback_rmse``, a result that
+    jumps more than ``tracking_max_jump_m`` / ``tracking_max_jump_deg`` from the
+    guess, or fewer than ``tracking_min_overlap`` of the points paired."""
+    fit = config.registration
+    start = time.perf_counter()
+    T_fine, rmse = _icp(moving, fixed, motion, fit, icp)
+    jump = np.linalg.inv(motion) @ T_fine
+    jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
+    paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
+    timings = {"icp": _ms(start)}
+    reasons = []
+    if not rmse <= fit.icp_fallback_rmse:
+        reasons.append(f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m")
+    if jump_m > fit.tracking_max_jump_m or jump_deg > fit.tracking_max_jump_deg:
+        reasons.append(f"{jump_m:.2f} m and {jump_deg:.2f} deg from the last motion")
+    if paired < fit.tracking_min_overlap:
+        reasons.append(f"{paired:.0%} of the points paired")
+    none = np.zeros((0, 2), dtype=np.int64)
+    pair = PairRegistration(
+        moving.points,
+        fixed.points,
+        none,
+        np.zeros(0, bool),
+        motion,
+        T_fine,
+        rmse,
+        timings,
+        tracked=True,
+        constraint=constraint,
+    )
+    return pair, "; ".join(reasons)
+
+
+def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None, icp=None):
+    """Register ``moving`` onto ``fixed``; ``guess`` (4 x 4) is the fallback
+    initial transform (identity if None) when the robust fit fails or ICP
+    ends far off. Never raises on a hard pair: the reason is in ``fallback``.
+    ``icp`` is the run's :class:`helpers.icp_service.IcpService` (one from
+    ``[registration]`` when None)."""
+    guess = np.eye(4) if guess is None else guess
+    features, fit = config.features, config.registration
+    timings, fallback = {}, None
+
+    # 1. Match the keypoints' descriptors (current scan = moving, previous scan = fixed).
+    start = time.perf_counter()
+    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
+    for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
+        if len(frame.features) != len(chosen):
+            raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
+    matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio)
+    matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
+    timings["match"] = _ms(start)
+
+    # 2. Robust rigid fit on the matched points.
+    start = time.perf_counter()
+    inliers = np.zeros(len(matches), dtype=bool)
+    try:
+        T_coarse, inliers = estimate_rigid_msac(
+            moving.points[matches[:, 0]],
+            fixed.points[matches[:, 1]],
+            fit.max_distance,
+            fit.max_num_trials,
+            fit.seed,
+            fit.confidence,
+        )
+    except SlamError as exc:
+        T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
+    timings["msac"] = _ms(start)
+
+    # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
+    start = time.perf_counter()
+    T_fine, rmse = _icp(moving, fixed, T_coarse, fit, icp)
+    if rmse > fit.icp_fallback_rmse and fallback is None:
+        T_retry, rmse_retry = _icp(moving, fixed, guess, fit, icp)
+        fallback = f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m from the robust fit; "
+        if rmse_retry < rmse:
+            T_fine, rmse, T_coarse = T_retry, rmse_retry, guess
+            fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
+        else:
+            fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
+    constraint = float("nan")
+    if moving.icp is not None and fixed.icp is not None:
+        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
+    timings["icp"] = _ms(start)
+    return PairRegistration(
+        moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback, constraint=constraint
+    )
+
+
+def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=None) -> PairRegistration:
+    """Downsample, describe, match, fit and refine one pair of scans
+    (moving -> fixed), returning everything a figure needs."""
+    config = config or Config()
+    moving = describe(prepare(check_points(moving_scan, "the moving scan"), config), config)
+    fixed = describe(prepare(check_points(fixed_scan, "the fixed scan"), config), config)
+    result = register_frames(moving, fixed, config, guess)
+    result.timings = _add(moving.timings, result.timings)
+    return result
+
+
+def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None):
+    """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``."""
+    wanted = (fit.metric, fit.icp_backend)
+    source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
+    target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
+    icp = icp or IcpService.from_config(fit)
+    return icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=fit.icp_max_iterations)
+
+
+def _add(*timings: dict) -> dict:
+    """Stage timings (ms) summed stage by stage."""
+    out = {}
+    for part in timings:
+        for stage, ms in part.items():
+            out[stage] = out.get(stage, 0.0) + ms
+    return out
+
+
+def _ms(start: float) -> float:
+    return 1000.0 * (time.perf_counter() - start)

@@ -1,0 +1,257 @@
+"""The reference's main loop as an object that takes one scan at a time.
+
+:class:`Slam` runs each accepted scan through the stages in turn: the
+odometry registers it onto the previous accepted scan, the loop closer adds
+it to the current submap and queries the old submaps for a loop, and the
+scan is registered to the few scans before it (edges back). Every stage
+works on the same downsampled scan, made ready for ICP once by the run's
+one :class:`helpers.icp_service.IcpService`. :meth:`Slam.result` then
+optimises the pose graph and rebuilds the map::
+
+    slam = Slam(config, anchor=data.poses[0])
+    for index, scan in enumerate(data.scans):
+        step = slam.process(scan, index)  # prints in one line
+    result = slam.result()
+
+Accepted scans are the pose-graph nodes, numbered 0, 1, 2, ...;
+``result.indices[k]`` is the dataset index of node ``k``.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .config import Config
+from .errors import SlamError
+from .factors import Edge, information_from_sigmas
+from .features import grid_average
+from .frames import prepare
+from .geometry import check_points, check_pose
+from .icp_service import IcpService
+from .loopclosure import LoopCloser, LoopQuery
+from .odometry import Odometry, OdometryResult
+from .posegraph import OptimizationResult, PoseGraph
+from .submaps import SubmapIndex, build_submap
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Step:
+    """What :meth:`Slam.process` did with one scan."""
+
+    index: int  # dataset index of the scan
+    accepted: bool  # False: skipped (``skip_frames``), nothing else happened
+    node: int | None = None  # its pose-graph node
+    T_map_sensor: np.ndarray | None = None  # its odometry pose
+    fallback: str | None = None  # why the odometry fell back, if it did
+    query: LoopQuery | None = None  # its loop query, if one registered a submap
+    edges_back: tuple[Edge, ...] = ()  # the edges back kept
+
+    @property
+    def loop(self) -> Edge | None:
+        """The loop edge this scan closed, if any."""
+        return None if self.query is None else self.query.closure
+
+    def __repr__(self) -> str:
+        if not self.accepted:
+            return f"Step(scan {self.index}: skipped)"
+        x, y, z = self.T_map_sensor[:3, 3]
+        loop = f"loop {self.loop.i}-{self.loop.j} ({self.loop.surface_rmse:.2f} m)" if self.loop else "no loop"
+        fallback = ", fell back" if self.fallback else ""
+        back = f"{len(self.edges_back)} edge{'' if len(self.edges_back) == 1 else 's'} back"
+        return f"Step(scan {self.index} -> node {self.node} at ({x:.1f}, {y:.1f}, {z:.1f}) m{fallback}, {back}, {loop})"
+
+
+@dataclass
+class SlamResult:
+    """What a run estimated; :mod:`helpers.evaluation` grades it against the ground truth."""
+
+    config: Config
+    indices: np.ndarray  # (K,) dataset index of each node
+    odometry: OdometryResult
+    clouds: list[np.ndarray]  # (N_k, 3) downsampled scans, sensor frame
+    submaps: SubmapIndex
+    queries: list[LoopQuery]
+    graph: OptimizationResult
+    extra_edges: list[Edge]  # odometry edges that skip nodes (see ``[pose_graph] edges_back``)
+    map_points: np.ndarray  # (M, 3) global map at the optimised poses
+    n_scans: int  # scans in the dataset, accepted or not
+    runtime_s: dict = field(default_factory=dict)
+    edges_back_tried: int = 0  # registrations to older scans attempted (``extra_edges`` holds those kept)
+
+    @property
+    def loops(self) -> list[Edge]:
+        """The accepted loop edges, in the order they were found."""
+        return [q.closure for q in self.queries if q.closure is not None]
+
+    @property
+    def poses_odometry(self) -> np.ndarray:
+        return self.odometry.poses
+
+    @property
+    def poses_optimized(self) -> np.ndarray:
+        return self.graph.poses
+
+
+class EdgesBack:
+    """Registers every node to the nodes 2 .. ``edges_back`` before it, from
+    the chained odometry as the guess. Each extra edge measures the motion
+    again with other points, so the pose graph can average the odometry's
+    random errors instead of summing them. Registrations scored above
+    ``rmse_threshold`` (surface RMSE) are left out.
+
+    ICP starts close and stops after ``max_iterations``: some edges never
+    meet the tolerance but oscillate by millimetres until any cap, and a low
+    cap gives the same trajectory sooner (notebook 6 and the benchmarks
+    measure it)."""
+
+    def __init__(self, icp: IcpService, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
+        self.icp, self.edges_back, self.max_iterations = icp, edges_back, max_iterations
+        self.rmse_threshold = rmse_threshold
+        self.edges: list[Edge] = []
+        self.tried = 0
+
+    def add(self, j: int, clouds, relative) -> list[Edge]:
+        """The edges back of node ``j`` (``clouds`` of nodes 0 .. j, ``relative`` the odometry steps)."""
+        kept = []
+        for back in range(2, min(self.edges_back, j) + 1):
+            guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
+            T_i_j, rmse = self.icp(
+                moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
+            )
+            self.tried += 1
+            if rmse < self.rmse_threshold:
+                kept.append(Edge(j - back, j, T_i_j, rmse))
+            else:
+                log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
+        self.edges.extend(kept)
+        return kept
+
+    def sorted(self) -> list[Edge]:
+        """Every kept edge, ordered by span, then by node."""
+        return sorted(self.edges, key=lambda e: (e.j - e.i, e.j))
+
+
+class Slam:
+    """The main loop, one scan at a time (see the module's docstring).
+
+    ``anchor`` (``T_map_sensor``, 4 x 4) is the first accepted scan's pose
+    (identity when None). ``odometry``: an odometry already computed for
+    these scans with this configuration; the run then reuses its poses and
+    registers nothing scan to scan (a back end for tests and notebooks).
+    """
+
+    def __init__(self, config: Config | None = None, anchor=None, odometry: OdometryResult | None = None) -> None:
+        self.config = config = config or Config()
+        anchor = np.eye(4) if anchor is None else anchor
+        self.anchor = check_pose(np.asarray(anchor, dtype=float), "the anchor pose")
+        self.icp = IcpService.from_config(config.registration)
+        self.odometry = Odometry(config, self.anchor, self.icp)
+        self.given = odometry
+        self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
+        graph = config.pose_graph
+        rmse_threshold = config.loop_closure.rmse_threshold  # an edge back must fit as well as a loop edge
+        self.edges_back = EdgesBack(self.icp, graph.edges_back, graph.edges_back_icp_max_iterations, rmse_threshold)
+        self.clouds: list[np.ndarray] = []
+        self.indices: list[int] = []
+        self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)
+
+    def accepts(self, index: int) -> bool:
+        """Whether scan ``index`` becomes a node: every ``skip_frames``-th (or the given odometry's)."""
+        if self.given is not None:
+            return len(self.indices) < len(self.given.indices) and index == self.given.indices[len(self.indices)]
+        return index % self.config.registration.skip_frames == 0
+
+    def process(self, scan: np.ndarray, index: int) -> Step:
+        """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order."""
+        if self.indices and index <= self.indices[-1]:
+            raise SlamError(f"scan {index} comes after scan {self.indices[-1]}: scans must arrive in order")
+        if not self.accepts(index):
+            return Step(index, accepted=False)
+        node, config = len(self.indices), self.config
+        # 1. Odometry: register the scan onto the previous accepted one (prepared once, for every stage).
+        start = time.perf_counter()
+        fallback = None
+        if self.given is None:
+            frame = prepare(check_points(scan, f"scan {index}"), config)
+            pair = self.odometry.register(frame, index)
+            fallback = pair.fallback if pair is not None else None
+            self.icp.keep(frame.icp_points, frame.icp)
+            cloud, poses, relative = frame.icp_points, self.odometry.poses, self.odometry.relative
+        else:
+            step = config.registration.icp_grid_step or config.features.grid_step
+            cloud = grid_average(check_points(scan, f"scan {index}"), step)
+            poses, relative = self.given.poses, self.given.relative
+        self.clouds.append(cloud)
+        self.indices.append(int(index))
+        self.runtime["odometry"] += time.perf_counter() - start
+        # 2. Submap and loop query, on the odometry poses.
+        start = time.perf_counter()
+        query = self.loops.add(node, cloud, poses[node], self.clouds, poses)
+        self.runtime["submaps_and_loop_closure"] += time.perf_counter() - start
+        # 3. Edges back, from the chained odometry.
+        start = time.perf_counter()
+        edges = self.edges_back.add(node, self.clouds, relative)
+        self.runtime["edges_back"] += time.perf_counter() - start
+        return Step(index, True, node, poses[node], fallback, query, tuple(edges))
+
+    def result(self, n_scans: int | None = None) -> SlamResult:
+        """Optimise the pose graph and rebuild the map at the optimised poses.
+        ``n_scans``: the flight's scans, accepted or not (by default up to the last one processed)."""
+        if len(self.indices) < 2:
+            raise SlamError(f"SLAM needs at least 2 accepted scans, got {len(self.indices)}")
+        config, runtime = self.config, dict(self.runtime)
+        odometry = self.given if self.given is not None else self.odometry.result()
+        # 4. Pose graph: odometry edges, edges to older scans, loop edges, the first node anchored.
+        start = time.perf_counter()
+        extra = self.edges_back.sorted()
+        graph = build_pose_graph(odometry, extra, self.loops.loops, config)
+        optimized = graph.optimize(anchor_pose=self.anchor, loop_kernel=config.pose_graph.loop_kernel)
+        runtime["pose_graph"] = time.perf_counter() - start
+        # 5. The map: every accepted scan at its optimised pose, merged on a grid.
+        start = time.perf_counter()
+        map_points = build_submap(self.clouds, optimized.poses, config.map.align_grid_step)
+        runtime["map"] = time.perf_counter() - start
+        return SlamResult(
+            config=config,
+            indices=np.array(self.indices, dtype=np.int64),
+            odometry=odometry,
+            clouds=list(self.clouds),
+            submaps=self.loops.submaps,
+            queries=list(self.loops.queries),
+            graph=optimized,
+            extra_edges=extra,
+            map_points=map_points,
+            n_scans=self.indices[-1] + 1 if n_scans is None else n_scans,
+            runtime_s=runtime,
+            edges_back_tried=self.edges_back.tried,
+        )
+
+
+def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: Config) -> PoseGraph:
+    """The pose graph of a run: the first node at the first odometry pose, an
+    edge per odometry step, the ``extra`` edges that skip nodes and the
+    ``loops`` (anything with ``i``, ``j`` and ``relative``) as loop edges.
+
+    With ``graph_weights = "icp"`` every registration gets the sigmas of
+    ``[pose_graph] edge_sigma_m`` and ``edge_sigma_deg``, times the number of
+    steps an edge spans: an edge to the scan ``k`` nodes back is measured on a
+    smaller overlap and is less sure (notebook 6 measures how much).
+    """
+    icp_weights = config.pose_graph.graph_weights == "icp"
+    sigmas = config.pose_graph.edge_sigmas if icp_weights else np.ones(6)
+    graph = PoseGraph()
+    graph.add_node(odometry.poses[0])
+    for step in odometry.relative:
+        graph.append(step, sigmas)
+    for edge in extra:
+        graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if icp_weights else 1))
+    information = information_from_sigmas(sigmas)
+    for loop in loops:
+        graph.add_loop(loop.i, loop.j, loop.relative, information)
+    return graph
