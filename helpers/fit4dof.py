@@ -211,11 +211,14 @@ def _locally_optimised(model, moving, fixed, pair_terms, max_distance):
 
 
 def _distinct_pairs(rng: np.random.Generator, n: int, count: int) -> np.ndarray:
-    """(count, 2) index pairs, two different indices in [0, n) each, uniformly."""
-    a = rng.integers(0, n, count)
-    b = rng.integers(0, n - 1, count)
-    b += b >= a
-    return np.column_stack([a, b])
+    """(count, 2) index pairs, two different indices in [0, n) each, uniformly.
+
+    Drawn row by row, so a smaller ``count`` gives the first rows of a larger
+    one: a lower trial cap only cuts the same sequence of samples short.
+    """
+    pairs = rng.integers(0, [n, n - 1], (count, 2))
+    pairs[:, 1] += pairs[:, 1] >= pairs[:, 0]
+    return pairs
 
 
 def _pair_motions(moving: np.ndarray, fixed: np.ndarray, min_baseline: float):

@@ -6,6 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
 from helpers.fit4dof import (
+    _distinct_pairs,
     _pair_terms,
     estimate_yaw_msac,
     fit_yaw,
@@ -133,3 +134,14 @@ def test_weighted_least_squares_yaw_ignores_pairs_of_zero_weight():
     moving, fixed, truth, outliers = _moved(seed=9, outlier_fraction=0.3)
     angle, offset = fit_yaw(moving, fixed, weights=(~outliers).astype(float))
     np.testing.assert_allclose(yaw_transform(angle, offset), truth, atol=1e-9)
+
+
+def test_a_lower_trial_cap_cuts_the_same_samples_short():
+    moving, fixed, _, _ = _moved(seed=6, outlier_fraction=0.85, noise=0.05)
+    full = fit_yaw_translation(moving, fixed, 0.3, 3000, seed=2)
+    cut = fit_yaw_translation(moving, fixed, 0.3, full.trials, seed=2)
+    assert full.trials < 3000  # it stopped early, after the very samples the cut run draws
+    np.testing.assert_array_equal(cut.T, full.T)
+    pairs = _distinct_pairs(np.random.default_rng(0), 5, 20000)
+    assert (pairs[:, 0] != pairs[:, 1]).all() and pairs.min() == 0 and pairs.max() == 4
+    assert np.bincount(pairs.ravel(), minlength=5) == pytest.approx(np.full(5, 8000), rel=0.05)
