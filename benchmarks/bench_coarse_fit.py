@@ -9,7 +9,8 @@ Flights: ``default`` (the default scene at 700 m, the reference's values),
 ``autzen250`` (the real tile beside the repository, 150 and 250 m above its
 ground); the low flights take the values ``helpers.fitting`` fits to them, as
 ``run`` does. Each pair is two consecutive accepted scans (``skip_frames``
-apart), the pairs spread evenly over the flight. Descriptors and matches
+apart; ``--apart N``: N accepted scans apart, less overlap, as a loop
+candidate or a missed scan gives), the pairs spread evenly over the flight. Descriptors and matches
 come from the package's own functions, as the odometry makes them.
 
 Per method: CPU ms of the fit (process time, one thread), samples scored,
@@ -112,10 +113,10 @@ def errors(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) -> tuple
     return float(np.linalg.norm(error[:3, 3])), abs(float(yaw)), float(along), float(ground)
 
 
-def measure(name: str, pairs: int, caps) -> None:
+def measure(name: str, pairs: int, caps, apart: int) -> None:
     data, config = flight(name)
     fit = config.registration
-    skip = fit.skip_frames
+    skip = fit.skip_frames * apart
     starts = np.linspace(0, len(data) - 1 - skip, pairs).round().astype(int)
     print(
         f"\n== {name}: {data.name}, {flight_of(data).height:.0f} m above the ground, {len(starts)} pairs "
@@ -192,17 +193,20 @@ def measure(name: str, pairs: int, caps) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pairs", type=int, default=30, help="scan pairs per flight (default 30)")
+    parser.add_argument(
+        "--apart", type=int, default=1, help="pairs this many accepted scans apart (default 1: consecutive)"
+    )
     parser.add_argument("--flights", default="default,low", help="default, low, autzen150, autzen250 (comma-separated)")
     args = parser.parse_args()
     unknown = set(args.flights.split(",")) - {"default", *LOW_HEIGHTS}
-    if unknown or args.pairs < 1:
-        raise SystemExit(f"error: unknown flights {sorted(unknown)} or fewer than 1 pair")
+    if unknown or args.pairs < 1 or args.apart < 1:
+        raise SystemExit(f"error: unknown flights {sorted(unknown)}, or --pairs or --apart below 1")
     print(f"standard RANSAC trials at {CONFIDENCE:.0%} confidence (inlier ratio: 2-point / 3-point samples):")
     for w in RATIOS:
         print(f"  {w:.2f}: {trials_needed(w, CONFIDENCE, 10**9, 2):6d} / {trials_needed(w, CONFIDENCE, 10**9, 3):6d}")
     caps = [trials_needed(w, CONFIDENCE, 10**9, 2) for w in (0.1, 0.2)]
     for name in args.flights.split(","):
-        measure(name, args.pairs, caps)
+        measure(name, args.pairs, caps, args.apart)
 
 
 if __name__ == "__main__":
