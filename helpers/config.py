@@ -220,6 +220,9 @@ class PoseGraphConfig(BoundedTable):
     edges_back_icp_max_iterations: int = param(
         15, "most ICP iterations of an edge back (its guess, the chained odometry, is close already)"
     )
+    edges_back_rmse_threshold: float = param(
+        0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
+    )
     graph_weights: str = param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
@@ -228,6 +231,7 @@ class PoseGraphConfig(BoundedTable):
     def __post_init__(self):
         self._within("edges_back", 1, MAX_EDGES_BACK)
         self._within("edges_back_icp_max_iterations", 1, MAX_ITERATIONS)
+        self._between("edges_back_rmse_threshold", MIN_RMSE, MAX_LENGTH, "a positive number of metres")
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
