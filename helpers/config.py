@@ -72,7 +72,7 @@ def noise_seed_from_environment() -> int:
     never reads it.
     """
     value = os.environ.get(NOISE_SEED_VARIABLE, "0")
-    if not value.isdigit():
+    if not (value.isascii() and value.isdigit()):  # "²" is a digit to str.isdigit, not to int()
         raise SlamError(f"${NOISE_SEED_VARIABLE} must be a non-negative integer, got {value!r}")
     return int(value)
 

@@ -40,7 +40,7 @@ def test_the_entry_points_take_the_seed_from_the_environment(monkeypatch, tmp_pa
     assert pipeline.default_run(Config())[0].seed == 0  # a configuration given is taken as it is
 
 
-@pytest.mark.parametrize("value", ["-1", "one", "1.5", ""])
+@pytest.mark.parametrize("value", ["-1", "one", "1.5", "", "²"])
 def test_a_seed_that_is_not_a_count_is_one_error_line(monkeypatch, tmp_path, capsys, short_flight, value):
     monkeypatch.setenv(NOISE_SEED_VARIABLE, value)
     with pytest.raises(SlamError, match=f"\\${NOISE_SEED_VARIABLE} must be a non-negative integer"):
