@@ -12,12 +12,15 @@ holds its meaning and, where the reference has it, the reference's
     [loop_closure]
     sub_map_thresh = 15              # submaps
 
+The first table, ``[sensor]``, is the simulator's: it is defined with its
+ray-fan checks in :mod:`helpers.sensor_config` and imported here; the SLAM
+stages' tables follow in the workflow's order. Each stage reads its own table
+only. ``Config()`` is the same wherever it is built: the environment changes
+no default (:func:`noise_seed_from_environment` is read by the entry points
+alone).
+
 Out-of-range values are refused when a table is built, with one sentence
-saying which and why. Every value has a lower and an upper bound: far wider
-than any real flight needs, narrow enough that everything computed from it
-stays finite (no squared length overflows, no sigma's inverse is infinite) and
-means something (a grid step is at least a centimetre, a length at most a few
-kilometres, a count at most what a flight may have scans).
+saying which and why (the bounds and their reasons: :mod:`helpers.limits`).
 """
 
 from __future__ import annotations
@@ -37,22 +40,17 @@ from .limits import (
     MAX_LENGTH,
     MAX_NEIGHBORS,
     MAX_RADIUS,
-    MAX_RANGE,
-    MAX_RAYS_PER_FLIGHT,
-    MAX_RAYS_PER_SCAN,
     MAX_SCANS,
     MAX_TRIALS,
     MIN_GRID,
     MIN_RMSE,
     MIN_SIGMA,
-    POINT_BYTES,
-    RAY_BYTES,
     BoundedTable,
-    angle_count,
-    human_size,
+    param,
 )
+from .sensor_config import SensorConfig
 
-NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # the default lidar noise seed, when set (the tests' robustness run)
+NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # sets the lidar noise seed of the entry points (the robustness run)
 
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
@@ -61,77 +59,22 @@ GRAPH_WEIGHTS = ("icp", "identity")
 LOOP_KERNELS = ("none", "huber", "cauchy")
 
 
-def default_noise_seed() -> int:
-    """The default ``[sensor] seed``: 0, or ``$HELPERS_NOISE_SEED`` when it is set.
+def noise_seed_from_environment() -> int:
+    """``$HELPERS_NOISE_SEED`` when it is set, else 0: the lidar noise seed of a
+    run whose caller names none.
 
-    The variable lets the whole test suite, notebooks included, run on other
-    lidar noise than the committed outputs were made with (see the README's
-    development notes); nothing else needs it.
+    Read by the entry points only: :func:`helpers.create_dataset` without a
+    sensor, :func:`helpers.pipeline.default_run` without a configuration and
+    :func:`helpers.configfile.load_config` for a file that sets no ``[sensor]
+    seed`` (so the CLI). The variable lets the whole test suite, the
+    notebooks' kernels included, run on other lidar noise than the committed
+    outputs were made with (the README's development notes); ``Config()``
+    never reads it.
     """
     value = os.environ.get(NOISE_SEED_VARIABLE, "0")
-    if not value.isdigit():
+    if not (value.isascii() and value.isdigit()):  # "²" is a digit to str.isdigit, not to int()
         raise SlamError(f"${NOISE_SEED_VARIABLE} must be a non-negative integer, got {value!r}")
     return int(value)
-
-
-def _param(default, help: str, reference: str | None = None, **kwargs):
-    """A parameter with its meaning and the reference's name for it (None: ours alone)."""
-    return field(default=default, metadata={"help": help, "reference": reference}, **kwargs)
-
-
-@dataclass(frozen=True)
-class SensorConfig(BoundedTable):
-    """The simulated lidar and how it flies (notebook 1)."""
-
-    TABLE: ClassVar[str] = "sensor"
-    altitude: float = _param(700.0, "flight height in metres (z in the map frame), constant")
-    azimuth: tuple[float, float, float] = _param((-13.0, 13.0, 0.08), "ray angles across track [start, stop, step] deg")
-    elevation: tuple[float, float, float] = _param((-2.5, 2.5, 0.2), "ray angles along track [start, stop, step] deg")
-    max_range: float = _param(800.0, "returns farther than this many metres are lost")
-    range_noise: float = _param(0.02, "standard deviation of the range error, metres")
-    dropout: float = _param(0.01, "probability that a ray gives no return")
-    seed: int = field(default_factory=default_noise_seed, metadata={"help": "seed of the range noise and dropouts"})
-
-    def __post_init__(self):
-        for name in ("azimuth", "elevation"):
-            value = getattr(self, name)
-            start, stop, step = value if len(value) == 3 else (math.nan,) * 3
-            if not (-89.0 < start <= stop < 89.0 and 0 < step < math.inf):
-                raise SlamError(
-                    f"[sensor] {name} must be [start, stop, step] degrees with "
-                    f"-89 < start <= stop < 89 and a finite step > 0, got {list(value)}"
-                )
-            if stop - start < step * (1 - 1e-9):  # angle_count would be 1
-                raise SlamError(
-                    f"[sensor] {name} must hold at least two angles (stop - start >= step), got {list(value)}: "
-                    "a fan of one row or one column is a line, and scans of a line cannot be registered"
-                )
-        rays = math.prod((stop - start) / step + 1 for start, stop, step in (self.azimuth, self.elevation))
-        if rays > MAX_RAYS_PER_SCAN:
-            raise SlamError(
-                f"[sensor] asks for {rays:.2g} rays per scan (about {human_size(rays * RAY_BYTES)} of ray "
-                f"buffers); the limit is {MAX_RAYS_PER_SCAN:,} rays: use larger azimuth or elevation steps"
-            )
-        # From a deep-sea trench to the edge of space: every map's heights lie between.
-        self._between("altitude", -10_000.0, 100_000.0, "a finite number of metres")
-        self._between("max_range", 1.0, MAX_RANGE, "a positive number of metres")
-        self._between("range_noise", 0.0, self.max_range, "zero or a positive number of metres up to max_range,")
-        self._check("dropout", lambda v: 0 <= v < 1, "a probability in [0, 1)")
-        self._check("seed", lambda v: isinstance(v, int) and v >= 0, "a non-negative integer")
-
-    @property
-    def rays_per_scan(self) -> int:
-        return angle_count(*self.azimuth) * angle_count(*self.elevation)
-
-    def check_flight(self, n_scans: int) -> None:
-        """Refuse a flight whose scans together ask for more than :data:`MAX_RAYS_PER_FLIGHT` rays."""
-        rays = n_scans * self.rays_per_scan
-        if rays > MAX_RAYS_PER_FLIGHT:
-            raise SlamError(
-                f"{n_scans:,} scans of {self.rays_per_scan:,} rays ask for {rays:.2g} rays "
-                f"(about {human_size(rays * POINT_BYTES)} of points); the limit is {MAX_RAYS_PER_FLIGHT:,} rays "
-                "per flight: fly fewer waypoints or use larger angle steps"
-            )
 
 
 @dataclass(frozen=True)
@@ -139,13 +82,13 @@ class FeaturesConfig(BoundedTable):
     """What each scan is reduced to before registration, and how its features are matched (notebooks 2 and 3)."""
 
     TABLE: ClassVar[str] = "features"
-    grid_step: float = _param(1.5, "cell of the grid-average downsampling before features, metres", "gridStep")
-    neighbors: int = _param(60, "nearest neighbours for normals and FPFH", "neighbors")
-    keypoint_share: float = _param(
+    grid_step: float = param(1.5, "cell of the grid-average downsampling before features, metres", "gridStep")
+    neighbors: int = param(60, "nearest neighbours for normals and FPFH", "neighbors")
+    keypoint_share: float = param(
         1.0, "share of each scan's points, the most tilted, that are described and matched (1: all, the reference)"
     )
-    match_threshold: float = _param(0.1, "largest normalised descriptor distance of a match", "matchThreshold")
-    match_ratio: float = _param(0.97, "ratio test: best / second-best distance must be below it", "matchRatio")
+    match_threshold: float = param(0.1, "largest normalised descriptor distance of a match", "matchThreshold")
+    match_ratio: float = param(0.97, "ratio test: best / second-best distance must be below it", "matchRatio")
 
     def __post_init__(self):
         self._between("grid_step", MIN_GRID, MAX_LENGTH, "a positive number of metres")
@@ -160,32 +103,30 @@ class RegistrationConfig(BoundedTable):
     """Which scans are registered, the robust fit and ICP (notebook 3)."""
 
     TABLE: ClassVar[str] = "registration"
-    skip_frames: int = _param(3, "register every n-th scan only: the accepted scans", "skipFrames")
-    max_distance: float = _param(1.0, "inlier distance of the robust rigid fit (MSAC), metres", "maxDistance")
-    max_num_trials: int = _param(3000, "most hypotheses the robust fit draws", "maxNumTrails")
-    confidence: float = _param(
+    skip_frames: int = param(3, "register every n-th scan only: the accepted scans", "skipFrames")
+    max_distance: float = param(1.0, "inlier distance of the robust rigid fit (MSAC), metres", "maxDistance")
+    max_num_trials: int = param(3000, "most hypotheses the robust fit draws", "maxNumTrails")
+    confidence: float = param(
         0.99, "the robust fit stops once it is this sure to have drawn an all-inlier sample", "Confidence"
     )
-    seed: int = _param(0, "seed of the robust fit's sampling")
-    metric: str = _param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane", "metric")
-    inlier_distance: float = _param(
-        3.0, "ICP ignores correspondences farther apart than this, metres", "inlierDistance"
-    )
-    icp_grid_step: float = _param(0.75, "grid of the clouds ICP refines on, metres (0: the feature clouds)")
-    icp_backend: str = _param("small_gicp", "ICP library: small_gicp (fast) or open3d (the tutorial's first)")
-    icp_max_iterations: int = _param(30, "most ICP iterations")
-    icp_tolerance: float = _param(
+    seed: int = param(0, "seed of the robust fit's sampling")
+    metric: str = param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane", "metric")
+    inlier_distance: float = param(3.0, "ICP ignores correspondences farther apart than this, metres", "inlierDistance")
+    icp_grid_step: float = param(0.75, "grid of the clouds ICP refines on, metres (0: the feature clouds)")
+    icp_backend: str = param("small_gicp", "ICP library: small_gicp (fast) or open3d (the tutorial's first)")
+    icp_max_iterations: int = param(30, "most ICP iterations")
+    icp_tolerance: float = param(
         1e-3, "ICP stops earlier once an iteration changes its RMSE (m) and inlier share by less"
     )
-    icp_fallback_rmse: float = _param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
-    mode: str = _param(
+    icp_fallback_rmse: float = param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
+    mode: str = param(
         "global", "global: features and a robust fit for every scan (the reference); tracking: ICP from the last motion"
     )
-    tracking_max_jump_m: float = _param(
+    tracking_max_jump_m: float = param(
         1.0, "tracking: a step that ends this far (m) from the last motion is registered globally"
     )
-    tracking_max_jump_deg: float = _param(6.0, "tracking: ... or turns this much (deg) more or less than it")
-    tracking_min_overlap: float = _param(0.8, "tracking: ... or pairs a smaller share of its points than this")
+    tracking_max_jump_deg: float = param(6.0, "tracking: ... or turns this much (deg) more or less than it")
+    tracking_min_overlap: float = param(0.8, "tracking: ... or pairs a smaller share of its points than this")
 
     def __post_init__(self):
         self._check("skip_frames", lambda v: v >= 1, "an integer of at least 1")
@@ -214,8 +155,8 @@ class MapConfig(BoundedTable):
     """How registered scans are merged into submaps and the map (notebooks 4 and 7)."""
 
     TABLE: ClassVar[str] = "map"
-    align_grid_step: float = _param(1.2, "grid of the merge that builds submaps and the map, metres", "alignGridStep")
-    n_scans_per_submap: int = _param(3, "accepted scans per submap", "nScansPerSubmap")
+    align_grid_step: float = param(1.2, "grid of the merge that builds submaps and the map, metres", "alignGridStep")
+    n_scans_per_submap: int = param(3, "accepted scans per submap", "nScansPerSubmap")
 
     def __post_init__(self):
         self._between("align_grid_step", MIN_GRID, MAX_LENGTH, "a positive number of metres")
@@ -228,21 +169,21 @@ class LoopClosureConfig(BoundedTable):
     """Which old submaps a scan is compared with, and when a match is a loop (notebook 5)."""
 
     TABLE: ClassVar[str] = "loop_closure"
-    loop_closure_search_radius: float = _param(
+    loop_closure_search_radius: float = param(
         7.9, "submaps whose centre is nearer than this (metres) are candidates", "loopClosureSearchRadius"
     )
-    sub_map_thresh: int = _param(15, "the most recent submaps are never loop candidates", "subMapThresh")
-    loop_closure_threshold: float = _param(0.6, "surface RMSE (m) below which a submap matches", "loopClosureThreshold")
-    rmse_threshold: float = _param(
+    sub_map_thresh: int = param(15, "the most recent submaps are never loop candidates", "subMapThresh")
+    loop_closure_threshold: float = param(0.6, "surface RMSE (m) below which a submap matches", "loopClosureThreshold")
+    rmse_threshold: float = param(
         0.6, "surface RMSE (m) below which the best scan match is a loop edge", "rmseThreshold"
     )
-    loop_search_growth: float = _param(
+    loop_search_growth: float = param(
         0.02, "search radius grows by this share of the distance flown (drift grows with it; 0: the reference)"
     )
-    max_attempts: int = _param(3, "submaps registered at most per query, nearest first")
-    max_returned: int = _param(3, "matching submaps kept at most, best first")
-    icp_max_iterations: int = _param(50, "most ICP iterations when checking a submap or a loop edge")
-    min_constraint: float = _param(
+    max_attempts: int = param(3, "submaps registered at most per query, nearest first")
+    max_returned: int = param(3, "matching submaps kept at most, best first")
+    icp_max_iterations: int = param(50, "most ICP iterations when checking a submap or a loop edge")
+    min_constraint: float = param(
         0.005,
         "a loop edge must pin the motion: ICP's weakest over strongest direction at least this (0: the reference)",
     )
@@ -273,20 +214,24 @@ class PoseGraphConfig(BoundedTable):
     """
 
     TABLE: ClassVar[str] = "pose_graph"
-    edges_back: int = _param(
+    edges_back: int = param(
         4, "each scan is also registered to the scans up to this many nodes back (1: the reference)"
     )
-    edges_back_icp_max_iterations: int = _param(
+    edges_back_icp_max_iterations: int = param(
         15, "most ICP iterations of an edge back (its guess, the chained odometry, is close already)"
     )
-    graph_weights: str = _param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
-    edge_sigma_m: float = _param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
-    edge_sigma_deg: float = _param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
-    loop_kernel: str = _param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
+    edges_back_rmse_threshold: float = param(
+        0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
+    )
+    graph_weights: str = param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
+    edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
+    edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
+    loop_kernel: str = param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
 
     def __post_init__(self):
         self._within("edges_back", 1, MAX_EDGES_BACK)
         self._within("edges_back_icp_max_iterations", 1, MAX_ITERATIONS)
+        self._between("edges_back_rmse_threshold", MIN_RMSE, MAX_LENGTH, "a positive number of metres")
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")

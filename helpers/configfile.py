@@ -11,14 +11,16 @@ import dataclasses
 import tomllib
 from pathlib import Path
 
-from .config import STAGE_TABLES, Config
+from .config import STAGE_TABLES, Config, noise_seed_from_environment
 from .errors import SlamError
 
 
 def load_config(path: str | Path | None = None) -> Config:
-    """Read a TOML configuration; no path gives the reference defaults."""
+    """Read a TOML configuration; no path gives the defaults. Unless the file
+    sets ``[sensor] seed``, the seed is
+    :func:`~helpers.config.noise_seed_from_environment`'s (the CLI's entry)."""
     if path is None:
-        return Config()
+        return Config().with_values(sensor={"seed": noise_seed_from_environment()})
     path = Path(path)
     if not path.is_file():
         raise SlamError(f"config file not found: {path}")
@@ -28,7 +30,10 @@ def load_config(path: str | Path | None = None) -> Config:
         raise SlamError(f"config file {path} is not valid TOML: {exc}") from None
     except RecursionError:
         raise SlamError(f"config file {path} nests its values too deeply") from None
-    return config_from_dict(data, source=str(path))
+    config = config_from_dict(data, source=str(path))
+    if "seed" in data.get("sensor", {}):  # config_from_dict has checked that [sensor] is a table
+        return config
+    return config.with_values(sensor={"seed": noise_seed_from_environment()})
 
 
 def config_from_dict(data: dict, source: str = "config") -> Config:

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from . import paths
-from .config import Config, SensorConfig
+from .config import Config, SensorConfig, noise_seed_from_environment
 from .configfile import config_to_toml
 from .errors import SlamError
 from .geometry import transform_points
@@ -120,9 +120,11 @@ def create_dataset(
     otherwise). ``progress``: show a progress bar while casting. ``lazy``:
     cast each scan when it is read instead of all now (:class:`LazyScans`,
     for flights too long to hold; every read casts again, and an empty scan
-    is then found by the step that reads it).
+    is then found by the step that reads it). ``sensor``: None is the default
+    sensor with the noise seed of
+    :func:`~helpers.config.noise_seed_from_environment`.
     """
-    sensor = sensor or SensorConfig()
+    sensor = sensor or SensorConfig(seed=noise_seed_from_environment())
     if map_path is None:
         field, frame, name = _default_surface(), IDENTITY_FRAME, "default scene"
     else:

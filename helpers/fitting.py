@@ -10,9 +10,14 @@ finer); counts that stand for distances (``skip_frames``, ``sub_map_thresh``)
 are recomputed from the waypoint spacing. On the reference's own flight every
 value comes out as the reference's.
 
-What is not scaled, and why: the loop search radius and the loop RMSE
-thresholds measure drift and surface noise, not the footprint; descriptor
-and robust-fit counts (neighbours, trials) do not depend on the scale.
+What is not scaled, and why: the loop search radius and the RMSE
+thresholds (of loops and of edges back) measure drift and surface noise, not
+the footprint; descriptor and robust-fit counts (neighbours, trials) do not
+depend on the scale.
+
+The values scaled are :data:`TUNED_AT`: our defaults, which are the
+reference's values wherever the reference has the parameter, and ours
+(``icp_grid_step``) tuned on the same flight.
 """
 
 from __future__ import annotations
@@ -28,11 +33,11 @@ from .errors import SlamError
 # The reference's flight, measured on the shipped default (the values were tuned for it).
 REFERENCE_HEIGHT = 603.0  # m above the ground, median over the waypoints
 REFERENCE_SPACING = 2.0  # m between waypoints
-REFERENCE = Config()  # its values
-REFERENCE_LOOP_AGE = (  # m flown before a place can close a loop: 15 submaps of 3 accepted scans 6 m apart
-    REFERENCE.loop_closure.sub_map_thresh
-    * REFERENCE.map.n_scans_per_submap
-    * REFERENCE.registration.skip_frames
+TUNED_AT = Config()  # the values tuned for that flight: our defaults (not Config.reference(), see above)
+REFERENCE_LOOP_AGE = (  # m flown before a place can close a loop: sub_map_thresh submaps of accepted scans
+    TUNED_AT.loop_closure.sub_map_thresh
+    * TUNED_AT.map.n_scans_per_submap
+    * TUNED_AT.registration.skip_frames
     * REFERENCE_SPACING
 )
 GRID_ROUNDING = 0.05  # m: fitted grid steps are multiples of this
@@ -71,7 +76,7 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         )
     k = flight.height / REFERENCE_HEIGHT
     along = flight.spacing / REFERENCE_SPACING  # how much farther apart the waypoints are
-    ref_fit, ref_features = REFERENCE.registration, REFERENCE.features
+    ref_fit, ref_features = TUNED_AT.registration, TUNED_AT.features
 
     def grid(value):  # a multiple of GRID_ROUNDING, written as one (1.5, not 1.5000000000000002)
         return round(max(1, round(value / GRID_ROUNDING)) * GRID_ROUNDING, 6)
@@ -93,7 +98,7 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
             f"ground, not finer than the {flight.surface_cell:g} m surface",
         ),
         ("registration", "icp_grid_step"): (grid(ref_fit.icp_grid_step * scale), "half the grid step"),
-        ("map", "align_grid_step"): (grid(REFERENCE.map.align_grid_step * scale), "0.8 x the grid step"),
+        ("map", "align_grid_step"): (grid(TUNED_AT.map.align_grid_step * scale), "0.8 x the grid step"),
         ("registration", "max_distance"): (round(ref_fit.max_distance * scale, 2), "follows the grid step"),
         ("registration", "inlier_distance"): (round(ref_fit.inlier_distance * scale, 2), "2 x the grid step"),
         ("loop_closure", "sub_map_thresh"): (

@@ -27,10 +27,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .loopclosure import radius_after
 from .sensor import index_ranges
 
 MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
-LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many radii
+LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many (fixed) radii away
 FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation disagrees with the graph
 # (true loops end within a few sigmas of where the graph puts them, false ones far beyond: the benchmarks on the
 # default flight and on Autzen measure both)
@@ -164,16 +165,20 @@ def _some(indices, shown: int = 6) -> str:
 
 
 def _revisits(result, flown: np.ndarray) -> tuple[int, int]:
-    """Nodes whose odometry position comes back within the loop search radius of
-    a node left more than ``LEFT_FACTOR`` radii of flight earlier (revisits),
-    and how many of them have no loop edge within that radius of flight.
+    """Nodes whose odometry position comes back within the loop search radius
+    (the loop closer's, :func:`helpers.loopclosure.radius_after`) of a node
+    left more than ``LEFT_FACTOR`` fixed radii of flight earlier (revisits),
+    and how many of them have no loop edge within that many radii of flight.
     ``flown``: the distance flown to each node, along the odometry."""
     positions = result.odometry.poses[:, :3, 3]
     if len(positions) < 3:
         return 0, 0
-    radius = result.config.loop_closure.loop_closure_search_radius
-    near = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2) < radius
-    left = (flown[:, None] - flown[None, :]) > LEFT_FACTOR * radius  # row k flew that far since column i
+    settings = result.config.loop_closure
+    since = flown[:, None] - flown[None, :]  # row k flew that far since column i
+    reach = radius_after(np.abs(since), settings)  # the loop closer's search radius between each pair
+    near = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2) < reach
+    radius = radius_after(0.0, settings)  # around a place just left: the fixed radius
+    left = since > LEFT_FACTOR * radius
     revisit = (near & left).any(axis=1)
     closed = np.zeros(len(positions), bool)
     for loop in result.loops:

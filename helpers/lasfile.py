@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import human_size
 from .errors import SlamError
+from .limits import human_size
 
 MAX_LAZ_RATIO = 50  # a LAZ file decompresses to at most this many times its size
 # The public header block of LAS 1.0-1.4 up to the bounds: signature, version, header size, offset to the

@@ -1,5 +1,5 @@
 """What a configuration may ask for, and the checks that hold a table of
-:mod:`helpers.config` to it.
+:mod:`helpers.config` to it (with :func:`param`, how each table declares a value).
 
 The bounds are generous for real use and far below what would exhaust a
 machine or overflow a computation made from them (a squared distance, a
@@ -9,24 +9,25 @@ sigma's inverse square, a float32 range); each says why it is where it is.
 from __future__ import annotations
 
 import math
+from dataclasses import field
 from typing import ClassVar
 
 from .errors import SlamError
 
 # What a configuration may ask for.
-MAX_RAYS_PER_SCAN = 1_000_000  # 118 times the default fan (326 x 26 = 8476 rays)
-MAX_RAYS_PER_FLIGHT = 200_000_000  # all scans together: 34 times the default flight (689 scans)
-RAY_BYTES = 160  # memory a ray takes while its scan is cast (measured 157 on a 325k-ray fan)
-POINT_BYTES = 40  # memory a return keeps until the flight is written (measured 37)
-MAX_TRIALS = 1_000_000  # robust-fit hypotheses (the default draws 3000; their samples take 24 bytes each)
-MAX_NEIGHBORS = 1_000  # neighbours of a normal or FPFH (the default takes 60)
-MAX_EDGES_BACK = 100  # each is one more registration per scan (the default makes 4)
-MAX_ITERATIONS = 10_000  # ICP iterations
-MAX_SCANS = 1_000_000  # waypoints of a flight, one scan each (1450 times the default flight)
+MAX_RAYS_PER_SCAN = 1_000_000  # a thousand by a thousand rays: far denser than a survey lidar's fan
+MAX_RAYS_PER_FLIGHT = 200_000_000  # all scans together: their returns (POINT_BYTES each) fit in a workstation
+RAY_BYTES = 160  # memory a ray takes while its scan is cast, rounded up: for the size an error quotes
+POINT_BYTES = 40  # memory a return keeps until the flight is written, rounded up: likewise
+MAX_TRIALS = 1_000_000  # robust-fit hypotheses: their samples (24 bytes each) are held at once
+MAX_NEIGHBORS = 1_000  # neighbours of a normal or FPFH: far more than a local surface needs
+MAX_EDGES_BACK = 100  # each is one more registration per scan (and per loop query, for the loop limits)
+MAX_ITERATIONS = 10_000  # ICP iterations: far more than a registration from a close guess takes
+MAX_SCANS = 1_000_000  # waypoints of a flight, one scan each
 MIN_GRID = 0.01  # m: a grid step finer than a centimetre is far below the lidar's noise
-MAX_LENGTH = 1_000.0  # m: grid steps and distances; a kilometre is a whole scan's width at the default height
-MAX_RADIUS = 10_000.0  # m: a search radius beyond any tile (MAX_MAP_CELLS at 1 m is about 7 km across)
-MAX_RANGE = 1_000_000.0  # m: lidar range; a thousand times the default and still finite in float32 rays
+MAX_LENGTH = 1_000.0  # m: grid steps and distances; a kilometre spans a whole scan of a survey flight
+MAX_RADIUS = 10_000.0  # m: a search radius beyond any tile a height field can hold (helpers.mapio.MAX_MAP_CELLS)
+MAX_RANGE = 1_000_000.0  # m: lidar range; far beyond any lidar's and still finite in float32 rays
 MIN_RMSE = 0.001  # m: RMSE thresholds; a millimetre is below any lidar's noise
 MIN_SIGMA = 1e-6  # edge sigmas: an information of 1e12 already; 1e-300 would make it infinite
 
@@ -43,6 +44,11 @@ def human_size(nbytes: float) -> str:
             return f"{nbytes:.3g} {unit}"
         nbytes /= 1024
     return f"{nbytes:.3g} TiB"
+
+
+def param(default, help: str, reference: str | None = None):
+    """A table's value: its default, its meaning and the reference's (MATLAB) name for it (None: ours alone)."""
+    return field(default=default, metadata={"help": help, "reference": reference})
 
 
 class BoundedTable:

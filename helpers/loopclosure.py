@@ -3,7 +3,7 @@ by ICP, then turn the best scan-to-scan match into a loop edge.
 
 :class:`LoopCloser` owns the submaps and every loop rule, in one place:
 which submaps are old enough (:func:`eligible_submaps`), how far the search
-reaches (:func:`search_radius`), the check of the candidates
+reaches (:func:`search_radius`, from :func:`radius_after`), the check of the candidates
 (:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`)
 and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). Figures,
 the health report and the exercises call these rules; none re-derives one.
@@ -161,14 +161,20 @@ def eligible_submaps(n_submaps: int, settings: LoopClosureConfig) -> int:
     return max(0, n_submaps - settings.sub_map_thresh)
 
 
+def radius_after(flown, settings: LoopClosureConfig):
+    """The search radius (m) around a place left ``flown`` metres of flight
+    ago (a number or an array): ``loop_closure_search_radius +
+    loop_search_growth * flown``. Odometry drift grows with the distance
+    flown, so an old place can look farther away than it is; a growth of 0
+    is the reference's fixed radius."""
+    return settings.loop_closure_search_radius + settings.loop_search_growth * np.asarray(flown, float)
+
+
 def search_radius(submap_centres: np.ndarray, position: np.ndarray, settings: LoopClosureConfig) -> np.ndarray:
-    """The search radius (m) around every submap for a scan at ``position``:
-    ``loop_closure_search_radius + loop_search_growth * d``, with ``d`` the
-    distance flown since the submap (:func:`distance_flown_since`). Odometry
-    drift grows with the distance flown, so an old place can look farther
-    away than it is; a growth of 0 is the reference's fixed radius."""
-    flown = distance_flown_since(np.asarray(submap_centres, float).reshape(-1, 3), position)
-    return settings.loop_closure_search_radius + settings.loop_search_growth * flown
+    """The search radius (m) around every submap for a scan at ``position``
+    (:func:`radius_after` the distance flown since the submap,
+    :func:`distance_flown_since`)."""
+    return radius_after(distance_flown_since(np.asarray(submap_centres, float).reshape(-1, 3), position), settings)
 
 
 def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:

@@ -21,9 +21,9 @@ import numpy as np
 from scipy import ndimage
 
 from . import paths
-from .config import human_size
 from .errors import SlamError
 from .lasfile import check_las_file
+from .limits import human_size
 from .scene import BUILDING, GROUND, ROAD, TREE, WATER, HeightField
 
 log = logging.getLogger(__name__)

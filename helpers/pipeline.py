@@ -14,7 +14,7 @@ import pickle
 from pathlib import Path
 
 from . import paths
-from .config import Config
+from .config import Config, noise_seed_from_environment
 from .configfile import config_to_toml
 from .dataset import Dataset, create_dataset
 from .factors import Edge
@@ -68,8 +68,10 @@ def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
     once and then read from :func:`helpers.paths.cache_dir` (keyed by the
     configuration and the core package's files, so any change recomputes; so
     does a damaged file). Notebooks 4 to 7 start from here instead of from
-    hidden state; two of them computing it at once each write a whole file."""
-    config = config or Config()
+    hidden state; two of them computing it at once each write a whole file.
+    ``config``: None is the defaults with the noise seed of
+    :func:`~helpers.config.noise_seed_from_environment`."""
+    config = config or Config().with_values(sensor={"seed": noise_seed_from_environment()})
     key = hashlib.sha256(config_to_toml(config).encode() + core_fingerprint()).hexdigest()[:16]
     cache = paths.cache_dir() / f"slam-{key}.pkl"
     dataset = create_dataset(sensor=config.sensor)

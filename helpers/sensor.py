@@ -19,9 +19,10 @@ from functools import cached_property
 import numpy as np
 import open3d as o3d
 
-from .config import SensorConfig, angle_count
 from .errors import SlamError
+from .limits import angle_count
 from .scene import HeightField
+from .sensor_config import SensorConfig
 
 RAYS_PER_CAST = 200_000  # rays sent to Embree in one call (a 5 MB buffer, reused)
 

@@ -110,7 +110,7 @@ class EdgesBack:
     cap gives the same trajectory sooner (notebook 6 and the benchmarks
     measure it)."""
 
-    def __init__(self, icp: IcpService, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
+    def __init__(self, icp: IcpService, *, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
         self.icp, self.edges_back, self.max_iterations = icp, edges_back, max_iterations
         self.rmse_threshold = rmse_threshold
         self.edges: list[Edge] = []
@@ -155,8 +155,12 @@ class Slam:
         self.given = odometry
         self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
         graph = config.pose_graph
-        rmse_threshold = config.loop_closure.rmse_threshold  # an edge back must fit as well as a loop edge
-        self.edges_back = EdgesBack(self.icp, graph.edges_back, graph.edges_back_icp_max_iterations, rmse_threshold)
+        self.edges_back = EdgesBack(
+            self.icp,
+            edges_back=graph.edges_back,
+            max_iterations=graph.edges_back_icp_max_iterations,
+            rmse_threshold=graph.edges_back_rmse_threshold,
+        )
         self.clouds: list[np.ndarray] = []
         self.indices: list[int] = []
         self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)

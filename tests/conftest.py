@@ -17,14 +17,14 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import NOISE_SEED_VARIABLE, SensorConfig, default_noise_seed
+from helpers.config import NOISE_SEED_VARIABLE, SensorConfig, noise_seed_from_environment
 
 AUTZEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "autzen_trim.laz"  # the real tile beside the repo
 
 
 def pytest_report_header(config):
     threads = os.environ.get("OMP_NUM_THREADS", f"all {os.cpu_count()}")
-    return f"lidar noise seed: {default_noise_seed()} (${NOISE_SEED_VARIABLE}); OpenMP threads: {threads}"
+    return f"lidar noise seed: {noise_seed_from_environment()} (${NOISE_SEED_VARIABLE}); OpenMP threads: {threads}"
 
 
 @pytest.fixture(scope="session")
@@ -90,7 +90,7 @@ def flight_over(tmp_path_factory):
         xy = helpers.read_waypoints(helpers.DEFAULT_WAYPOINTS)[rows]
         path = tmp_path_factory.mktemp("flight") / "waypoints.csv"
         np.savetxt(path, xy, delimiter=",", header="x,y", comments="")
-        sensor = SensorConfig() if noise_seed is None else SensorConfig(seed=noise_seed)
+        sensor = None if noise_seed is None else SensorConfig(seed=noise_seed)  # None: the environment's seed
         return helpers.create_dataset(waypoints_path=path, sensor=sensor)
 
     return make

@@ -12,10 +12,11 @@ import numpy as np
 import pytest
 
 from helpers.__main__ import main
-from helpers.config import MAX_RAYS_PER_SCAN, STAGE_TABLES, Config, SensorConfig, angle_count
+from helpers.config import STAGE_TABLES, Config, SensorConfig
 from helpers.configfile import config_from_dict, load_config
 from helpers.errors import SlamError
 from helpers.fitting import Flight, fit_to_flight
+from helpers.limits import MAX_RAYS_PER_SCAN, angle_count
 from helpers.posegraph import information_from_sigmas
 
 # The cases of the issue: each was accepted and then aborted a run, or gave NaN and inf with exit 0.

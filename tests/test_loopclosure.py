@@ -301,3 +301,28 @@ def test_a_loop_on_ground_too_flat_to_pin_it_is_left_out(ground):
         edge = query.closure
         expected = np.linalg.inv(truth[edge.i]) @ revisit
         assert np.linalg.norm(edge.relative[:3, 3] - expected[:3, 3]) < 0.1
+
+
+def test_the_health_report_counts_a_revisit_where_the_loop_closer_would_search():
+    """Out 100 m along a line and back 9 m beside it: beyond the fixed 7.9 m radius, within the radius
+    grown with the distance flown since (radius_after, the loop closer's rule) for the nodes flown back
+    far enough; the health report counts those, and none with a fixed radius."""
+    from types import SimpleNamespace
+
+    from helpers.health import _revisits
+    from helpers.loopclosure import radius_after
+
+    x = np.arange(0.0, 101.0)
+    xy = np.concatenate([np.column_stack([x, np.zeros_like(x)]), np.column_stack([x[::-1], np.full_like(x, 9.0)])])
+    poses = np.tile(np.eye(4), (len(xy), 1, 1))
+    poses[:, :2, 3] = xy
+    flown = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(xy, axis=0), axis=1))])
+    for growth in (0.0, 0.02):
+        settings = Config().with_values(loop_closure={"loop_search_growth": growth}).loop_closure
+        result = SimpleNamespace(odometry=SimpleNamespace(poses=poses), config=SimpleNamespace(loop_closure=settings))
+        result.loops = []
+        back = np.arange(len(x), len(xy))  # the nodes flown back, each 9 m beside its twin on the way out
+        since = flown[back] - flown[len(x) - 1 - (back - len(x))]
+        expected = np.sum((radius_after(since, settings) > 9.0) & (since > 4 * 7.9))
+        assert _revisits(result, flown) == (expected, expected)
+        assert (expected > 0) == (growth > 0)

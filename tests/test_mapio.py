@@ -8,6 +8,7 @@ import pytest
 from scipy.io import savemat
 
 import helpers
+from helpers.config import noise_seed_from_environment
 from helpers.errors import SlamError
 from helpers.mapio import height_field_from_points, read_map
 from helpers.waypoints import read_waypoints
@@ -43,13 +44,17 @@ def test_waypoints_in_the_tile_coordinates_follow_the_tile(autzen, tmp_path):
     feet = np.array([centre + [-50.0, 0.0], centre + [50.0, 0.0]])
     path = tmp_path / "gTruthWayPoints.mat"
     savemat(path, {"gTruthTraj": feet})
-    data = helpers.create_dataset(autzen, path, helpers.SensorConfig(altitude=450.0))
+    data = helpers.create_dataset(
+        autzen, path, helpers.SensorConfig(altitude=450.0, seed=noise_seed_from_environment())
+    )
     np.testing.assert_allclose(data.waypoints[:, :2], [[-50 * FOOT, 0.0], [50 * FOOT, 0.0]], atol=1e-9)
     assert all(len(scan) > 1000 for scan in data.scans)
 
 
 def test_tile_without_waypoints_gets_a_fitted_loop(autzen):
-    data = helpers.create_dataset(autzen, sensor=helpers.SensorConfig(altitude=450.0))
+    data = helpers.create_dataset(
+        autzen, sensor=helpers.SensorConfig(altitude=450.0, seed=noise_seed_from_environment())
+    )
     xmin, xmax, ymin, ymax = data.surface.bounds
     assert len(data) > 100
     assert data.waypoints[:, 0].min() > xmin and data.waypoints[:, 0].max() < xmax
@@ -69,7 +74,8 @@ def test_the_scans_of_a_real_tile_lie_on_its_points(autzen):
     from helpers.dataset import MAP_CELL
 
     tile = read_map(autzen)
-    data = helpers.create_dataset(autzen, sensor=helpers.SensorConfig(altitude=280.0))  # about 150 m above ground
+    sensor = helpers.SensorConfig(altitude=280.0, seed=noise_seed_from_environment())  # about 150 m above ground
+    data = helpers.create_dataset(autzen, sensor=sensor)
     hits, field = data.map_points[::7].astype(float), data.surface  # a seventh of them: enough, and quick
     cell, max_gap = MAP_CELL, 3.0  # the height field's cell and its filled gap (height_field_from_points)
     # Horizontally: a filled cell is at most max_gap from a cell with points, and each point and hit is within

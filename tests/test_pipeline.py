@@ -111,6 +111,24 @@ def test_no_loop_possible_ends_with_odometry_only(short_loop, short_run):
     np.testing.assert_allclose(result.poses_optimized, result.poses_odometry, atol=1e-6)
 
 
+def test_edges_back_keep_by_their_own_threshold(short_loop, short_run):
+    """[pose_graph] edges_back_rmse_threshold decides which edges back are kept, the loop edges' threshold
+    not at all (the fixture's odometry reused; no loop possible, so only the edges back run again)."""
+    no_loops = dict(sub_map_thresh=1000)
+    strict_loops = run_slam(
+        short_loop,
+        SHORT.with_values(loop_closure=dict(no_loops, rmse_threshold=0.001)),
+        odometry=short_run.odometry,
+    )
+    assert [(e.i, e.j) for e in strict_loops.extra_edges] == [(e.i, e.j) for e in short_run.extra_edges]
+    strict_edges = run_slam(
+        short_loop,
+        SHORT.with_values(loop_closure=no_loops, pose_graph=dict(edges_back_rmse_threshold=0.001)),
+        odometry=short_run.odometry,
+    )
+    assert strict_edges.edges_back_tried == short_run.edges_back_tried > 0 and strict_edges.extra_edges == []
+
+
 def test_flat_map_falls_back_instead_of_crashing(flat_plane):
     """Over a featureless plane nothing can be registered: every step is
     recorded as a fallback, and the run still ends with a result."""

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from helpers.config import SensorConfig
+from helpers.config import SensorConfig, noise_seed_from_environment
 from helpers.errors import SlamError
 from helpers.scene import GROUND, HeightField
 from helpers.sensor import Surface, cast_scans, check_coverage, poses_from_waypoints, ray_pattern
@@ -45,7 +45,7 @@ def test_max_range_and_dropout_remove_returns():
     short = cast_scans(field, poses, SensorConfig(max_range=601.0, range_noise=0.0, dropout=0.0))
     assert 0 < len(short.scans[0]) < 8476
     assert np.linalg.norm(short.scans[0], axis=1).max() <= 601.0 + 1e-6
-    sparse = cast_scans(field, poses, SensorConfig(dropout=0.5))
+    sparse = cast_scans(field, poses, SensorConfig(dropout=0.5, seed=noise_seed_from_environment()))
     assert abs(len(sparse.scans[0]) / 8476 - 0.5) < 0.03
 
 
@@ -53,7 +53,9 @@ def test_range_noise_has_the_configured_spread():
     field = Surface.from_height_field(flat_field(100.0))
     poses = poses_from_waypoints(np.array([[0.0, 0.0, 700.0]]))
     clean = cast_scans(field, poses, SensorConfig(range_noise=0.0, dropout=0.0)).scans[0]
-    noisy = cast_scans(field, poses, SensorConfig(range_noise=0.05, dropout=0.0)).scans[0]
+    noisy = cast_scans(
+        field, poses, SensorConfig(range_noise=0.05, dropout=0.0, seed=noise_seed_from_environment())
+    ).scans[0]
     error = np.linalg.norm(noisy, axis=1) - np.linalg.norm(clean, axis=1)
     assert abs(error.mean()) < 0.005
     assert error.std() == pytest.approx(0.05, rel=0.05)
