@@ -21,13 +21,18 @@ filled from the nearest cell) against holes filled linearly, and the default
 scene's own mesh against the same scene resampled as a sparse tile; ``start``
 ICP from the coarse fit against ICP from the true pose and from no motion;
 ``skip`` the step length (overlap of consecutive scans); ``metric`` the ICP
-metric; ``crop`` ICP with the moving points that the coarse fit places
-beyond the fixed scan's along-track edges (less the inlier distance) left out.
+metric; ``crop`` ICP with the moving points that its start places
+beyond the fixed scan's along-track edges (less the inlier distance) left out;
+``epsilon`` thinner generalized-ICP planes (less weight on residuals along the
+surface); ``steep`` ICP without the points on steep surfaces; ``rows`` the same
+flight with another along-track ray spacing (the sensor's elevation step: does
+ICP lock onto the ray rows?); ``fix`` the remedies together.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import time
 
@@ -37,6 +42,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 import numpy as np
 import open3d as o3d
 from scipy.interpolate import RegularGridInterpolator, griddata
+from scipy.ndimage import gaussian_filter
 
 from helpers import SensorConfig, default_scene, read_waypoints
 from helpers.config import Config
@@ -52,6 +58,7 @@ from helpers.sensor import Surface, poses_from_waypoints
 AUTZEN = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "autzen_trim.laz")
 CHAIN = 10  # steps chained for the ``chain`` stage
 FAILED = 1.0  # m: a pair whose translation is off by more failed (its own column; left out on the right)
+SMOOTHING = 2.0  # cells: the Gaussian that takes the steep slopes out of a tile's surface (the surface experiment)
 SPARSE_DENSITY = 1.8  # points per m² when the default scene is resampled as a tile (Autzen's density)
 
 # name: (scene, metres above the ground, first waypoint of the stretch)
@@ -74,6 +81,9 @@ def surface_of(scene: str, variant: str = "tile") -> tuple[HeightField, np.ndarr
         field = height_field_from_points(tile.points, tile.labels, MAP_CELL)
         if variant == "linear":
             field = _filled_linearly(field, tile.points)
+        if variant == "smooth":
+            z = gaussian_filter(field.z, SMOOTHING)
+            field = HeightField(field.x0, field.y0, field.cell, z, field.labels, field.valid)
         return field, fitted_loop(field)
     field = default_scene() if scene == "default" else default_scene(seed=int(scene.removeprefix("seed")))
     if variant == "sparse":
@@ -100,13 +110,16 @@ def _filled_linearly(field: HeightField, points: np.ndarray) -> HeightField:
     return HeightField(field.x0, field.y0, field.cell, z, field.labels, field.valid)
 
 
-def flight(name: str, pairs: int, skip: int | None = None, variant: str = "tile"):
-    """(dataset, fitted config) of a flight: a stretch giving ``pairs`` pairs of accepted scans."""
+def flight(name: str, pairs: int, skip: int | None = None, variant: str = "tile", elevation_step=None):
+    """(dataset, fitted config) of a flight: a stretch giving ``pairs`` pairs of accepted scans;
+    ``elevation_step`` (deg): the sensor's along-track ray spacing, when not the reference's."""
     scene, above, first = FLIGHTS[name]
     field, xy = surface_of(scene, variant)
     ground = float(np.median(field.z[field.cell_of(xy)]))
     altitude = 700.0 if above is None else ground + above
     sensor = SensorConfig(altitude=altitude, seed=0)
+    if elevation_step is not None:
+        sensor = dataclasses.replace(sensor, elevation=(*sensor.elevation[:2], elevation_step))
     waypoints = np.column_stack([xy, np.full(len(xy), altitude)])
     whole = Dataset([], poses_from_waypoints(waypoints), waypoints, field, IDENTITY_FRAME, sensor, name)
     config, _ = fit_to_flight(flight_of(whole), Config(sensor=sensor))
@@ -118,11 +131,12 @@ def flight(name: str, pairs: int, skip: int | None = None, variant: str = "tile"
     return Dataset(scans, poses, stretch, field, IDENTITY_FRAME, sensor, name), config
 
 
-def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own", epsilon=None) -> Frame:
+def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own", epsilon=None, steep=None) -> Frame:
     """A scan prepared as :func:`helpers.odometry.prepare` does, with its grid chosen by ``grid``:
     ``own`` (the package: cells of the scan's own frame), ``world`` (cells of the map frame, through the
     true pose), ``fine`` (both grids halved), ``raw`` (ICP on every point). ``epsilon``: Open3D's
-    generalized-ICP covariances made this thin across their plane (the package's: ``GICP_EPSILON``)."""
+    generalized-ICP covariances made this thin across their plane (the package's: ``GICP_EPSILON``).
+    ``steep``: ICP leaves out the points whose surface is tilted more than this (degrees)."""
     step, icp_step = config.features.grid_step, config.registration.icp_grid_step
     if grid == "fine":
         step, icp_step = step / 2, icp_step / 2
@@ -135,6 +149,9 @@ def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own",
         icp_points = scan if grid == "raw" else grid_average(scan, icp_step)
     fit = config.registration
     ready = icp_cloud(icp_points, fit.metric, fit.icp_backend)
+    if steep is not None:
+        icp_points = icp_points[np.abs(ready.normals[:, 2]) >= np.cos(np.radians(steep))]
+        ready = icp_cloud(icp_points, fit.metric, fit.icp_backend)
     if epsilon is not None:
         ready.cloud.covariances = o3d.utility.Matrix3dVector(gicp_covariances(ready.normals, epsilon))
     return describe(Frame(points, None, icp_points, {}, ready), config)
@@ -163,14 +180,14 @@ def overlap_crop(moving: Frame, fixed: Frame, T: np.ndarray, margin: float) -> n
     return (x >= low) & (x <= high)
 
 
-def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), crop=False, epsilon=None) -> dict:
+def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), crop=False, epsilon=None, steep=None):
     """Relative transforms per stage, (pairs, 4, 4) each, and the true ones (``truth``)."""
     fit = config.registration
     indices = np.arange(0, len(data.poses), fit.skip_frames)
     out = {"truth": [], "coarse": []} | {f"icp<{s}" if s != "coarse" else "icp": [] for s in starts}
     previous = None
     for k, index in enumerate(indices):
-        current = frame(data.scans[index], data.poses[index], config, grid, epsilon)
+        current = frame(data.scans[index], data.poses[index], config, grid, epsilon, steep)
         if previous is not None:
             truth = np.linalg.inv(data.poses[indices[k - 1]]) @ data.poses[index]
             pair = register_frames(current, previous, config)
@@ -178,7 +195,7 @@ def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), crop=
             out["coarse"].append(pair.T_coarse)
             for start in starts:
                 init = {"coarse": pair.T_coarse, "truth": truth, "identity": np.eye(4)}[start]
-                keep = overlap_crop(current, previous, pair.T_coarse, fit.inlier_distance) if crop else None
+                keep = overlap_crop(current, previous, init, fit.inlier_distance) if crop else None
                 T = pair.T_fine if start == "coarse" and not crop else icp(current, previous, init, config, keep)
                 out["icp" if start == "coarse" else f"icp<{start}"].append(T)
         previous = current
@@ -238,7 +255,7 @@ def main() -> None:
     parser.add_argument(
         "--experiment",
         default="stages",
-        choices=["stages", "grid", "surface", "start", "skip", "metric", "crop", "epsilon", "fix"],
+        choices=["stages", "grid", "surface", "start", "skip", "metric", "crop", "epsilon", "steep", "rows", "fix"],
     )
     parser.add_argument("--pairs", type=int, default=60, help="pairs of accepted scans per flight (default 60)")
     args = parser.parse_args()
@@ -247,10 +264,16 @@ def main() -> None:
     start = time.perf_counter()
     for name in names:
         if args.experiment == "surface":
-            variants = ("tile", "linear") if FLIGHTS[name][0] == "autzen" else ("tile", "sparse")
+            variants = ("tile", "linear", "smooth") if FLIGHTS[name][0] == "autzen" else ("tile", "sparse")
             for variant in variants:
                 data, config = flight(name, args.pairs, variant=variant)
                 report(f"{name} {variant}", measure(data, config))
+            continue
+        if args.experiment == "rows":
+            for step in (0.2, 0.16, 0.1):
+                data, config = flight(name, args.pairs, elevation_step=step)
+                report(f"{name} rows {step} deg", measure(data, config, starts=("coarse", "truth")))
+                report(f"{name} rows {step} cropped", measure(data, config, crop=True))
             continue
         if args.experiment == "skip":
             for skip in (1, 2, 3, 4):
@@ -277,6 +300,9 @@ def main() -> None:
             config = config.with_values(registration={"icp_backend": "open3d"})
             for epsilon in (GICP_EPSILON, GICP_EPSILON / 10, GICP_EPSILON / 100):
                 report(f"{name} open3d eps {epsilon:g}", measure(data, config, epsilon=epsilon))
+        elif args.experiment == "steep":
+            for steep in (None, 60.0, 45.0, 30.0):
+                report(f"{name} steep {steep}", measure(data, config, steep=steep))
         elif args.experiment == "fix":
             report(f"{name} as is", measure(data, config))
             report(f"{name} cropped fine", measure(data, config, "fine", crop=True))
