@@ -92,7 +92,7 @@ def _run(args) -> int:
     from .configfile import given_keys, load_config
     from .dataset import create_dataset
     from .evaluation import map_errors, run_metrics
-    from .fitting import fit_to_flight, flight_of
+    from .fitting import check_grid_steps, fit_to_flight, flight_of
     from .health import assess
     from .output import LEGACY_MARKER, MARKER, write_run
     from .paths import check_output_place
@@ -104,9 +104,11 @@ def _run(args) -> int:
     interactive = sys.stderr.isatty()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
     created = time.perf_counter() - start
+    flight = flight_of(data)
     if not args.reference_values:
-        flight = flight_of(data)
         config, reasons = fit_to_flight(flight, config, given_keys(args.config))
+    check_grid_steps(flight, config)  # before a word about the fit: a refused run prints only its error
+    if not args.reference_values:
         print(
             f"parameters fitted to the flight ({flight.height:.0f} m above the ground, a waypoint every "
             f"{flight.spacing:.1f} m; --reference-values keeps the reference's):"

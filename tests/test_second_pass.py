@@ -1,0 +1,79 @@
+"""A tester's second pass over bad inputs (issue 19): grid steps coarser than
+the scans' footprint, and the cases it found beyond the issue's list. Each
+input is built inside the test; each must end in one ``error:`` line, exit
+code 2, and nothing written."""
+
+import re
+import time
+
+import numpy as np
+import pytest
+
+import helpers
+from helpers.__main__ import main
+from helpers.config import Config
+from helpers.errors import SlamError
+from helpers.fitting import REFERENCE_HEIGHT, Flight, check_grid_steps, fit_to_flight, flight_of
+
+SHORT_FLIGHT = "x,y\n" + "\n".join(f"{2.0 * i},-120" for i in range(30)) + "\n"  # 30 waypoints of the default loop
+
+
+def _one_error_line(capsys, start: str) -> str:
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {start}"), lines
+    return lines[0]
+
+
+# Grid steps against the footprint ---------------------------------------------
+
+
+def test_a_map_grid_wider_than_the_footprint_allows_is_refused_before_the_run(tmp_path, capsys):
+    """align_grid_step = 1000 used to give a 4-point map marked trusted."""
+    flight = tmp_path / "flight.csv"
+    flight.write_text(SHORT_FLIGHT)
+    config = tmp_path / "coarse.toml"
+    config.write_text("[map]\nalign_grid_step = 1000\n")
+    start = time.perf_counter()
+    code = main(["run", "--waypoints", str(flight), "--config", str(config), "--out", str(tmp_path / "o")])
+    assert code == 2
+    line = _one_error_line(capsys, "[map] align_grid_step = 1000 m is too coarse for this flight")
+    assert re.search(r"cover 53\.\d m along the track .* the narrower, 10\.\d\d m", line)  # a fifth of the strip
+    assert time.perf_counter() - start < 30  # the dataset is cast, SLAM never starts
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize(
+    ("table", "key"), [("features", "grid_step"), ("registration", "icp_grid_step"), ("map", "align_grid_step")]
+)
+def test_every_grid_step_is_held_to_a_fifth_of_the_narrow_side(table, key):
+    flight = Flight(height=REFERENCE_HEIGHT, spacing=2.0, surface_cell=1.0, strip=50.0)  # 278 m across
+    check_grid_steps(flight, Config().with_values(**{table: {key: 10.0}}))  # exactly a fifth: kept
+    with pytest.raises(SlamError, match=rf"\[{table}\] {key} = 10.5 m .* at most 1/5 of the narrower, 10.00 m"):
+        check_grid_steps(flight, Config().with_values(**{table: {key: 10.5}}))
+
+
+def test_a_narrow_swath_is_the_footprint_that_counts():
+    """A sensor that looks 1 degree to each side: the swath, not the strip, is the narrow side."""
+    flight = Flight(height=600.0, spacing=2.0, surface_cell=1.0, strip=52.0)
+    narrow = Config().with_values(sensor={"azimuth": (-1.0, 1.0, 0.05)})  # 20.9 m across
+    with pytest.raises(SlamError, match=r"20\.9 m across .* 4\.19 m"):
+        check_grid_steps(flight, narrow.with_values(map={"align_grid_step": 5.0}))
+
+
+def test_the_default_the_low_and_the_real_flights_pass(default_dataset, grid_tile, autzen):
+    # the default flight, fitted and as the reference has it
+    flight = flight_of(default_dataset)
+    check_grid_steps(flight, fit_to_flight(flight, Config())[0])
+    check_grid_steps(flight, Config())
+    # 150 m above a plane, as tests/test_cli.py flies it, fitted and with the reference's values
+    tile = grid_tile("low.las", 150.0, 100.0, lambda x, y: 0.3 * np.sin(x / 7) * np.cos(y / 5))
+    low = helpers.create_dataset(tile, sensor=helpers.SensorConfig(altitude=150.0), lazy=True)
+    flight = flight_of(low)
+    assert flight.height == pytest.approx(150.0, abs=1.0)
+    check_grid_steps(flight, fit_to_flight(flight, Config())[0])
+    check_grid_steps(flight, Config())
+    # Autzen at the default altitude, and about 150 m above its ground
+    for altitude in (700.0, 280.0):
+        real = helpers.create_dataset(autzen, sensor=helpers.SensorConfig(altitude=altitude), lazy=True)
+        flight = flight_of(real)
+        check_grid_steps(flight, fit_to_flight(flight, Config())[0])
