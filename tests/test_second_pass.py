@@ -77,3 +77,25 @@ def test_the_default_the_low_and_the_real_flights_pass(default_dataset, grid_til
         real = helpers.create_dataset(autzen, sensor=helpers.SensorConfig(altitude=altitude), lazy=True)
         flight = flight_of(real)
         check_grid_steps(flight, fit_to_flight(flight, Config())[0])
+
+
+# Signals ----------------------------------------------------------------------
+
+
+def test_sigterm_while_the_output_is_written_leaves_nothing(tmp_path):
+    """SIGTERM (not only Ctrl-C) removes the temporary folder on the way out, at once."""
+    import signal
+    import subprocess
+    import sys
+
+    command = [sys.executable, "-m", "helpers", "dataset", "--out", str(tmp_path / "ds")]  # the default flight
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not any(".helpers-partial." in p.name for p in tmp_path.iterdir()):  # the scans are being written
+        assert process.poll() is None and time.monotonic() < deadline, process.communicate()
+        time.sleep(0.02)
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=30)
+    assert process.returncode == 128 + signal.SIGTERM, err
+    assert err.strip().splitlines() == ["error: terminated"]
+    assert list(tmp_path.iterdir()) == []
