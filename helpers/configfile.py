@@ -13,17 +13,16 @@ from pathlib import Path
 
 from .config import STAGE_TABLES, Config
 from .errors import SlamError
+from .paths import input_file
 
 
 def load_config(path: str | Path | None = None) -> Config:
     """Read a TOML configuration; no path gives the reference defaults."""
     if path is None:
         return Config()
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"config file not found: {path}")
+    path = input_file(path, "config file")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(_read_text(path))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SlamError(f"config file {path} is not valid TOML: {exc}") from None
     except RecursionError:
@@ -51,8 +50,13 @@ def given_keys(path: str | Path | None) -> frozenset[tuple[str, str]]:
     """The ``(table, key)`` pairs a TOML file sets (none without a file); read after :func:`load_config`."""
     if path is None:
         return frozenset()
-    data = tomllib.loads(Path(path).read_text())
+    data = tomllib.loads(_read_text(Path(path)))
     return frozenset((table, key) for table, values in data.items() for key in values)
+
+
+def _read_text(path: Path) -> str:
+    """A TOML file's text: UTF-8, as TOML is, with the byte-order mark some editors write first taken away."""
+    return path.read_text(encoding="utf-8-sig")
 
 
 def config_to_dict(config: Config, tables=STAGE_TABLES) -> dict:

@@ -72,9 +72,7 @@ class AerialMap:
 
 def read_map(path: str | Path) -> AerialMap:
     """Read a ``.las``, ``.laz`` or ``.tar.gz`` holding one."""
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"map file not found: {path}")
+    path = paths.input_file(path, "map file")
     name = path.name.lower()
     if name.endswith((".tar.gz", ".tgz")):
         tile = _extract_las(path)

@@ -18,6 +18,7 @@ import os
 import re
 import shutil
 import socket
+import stat
 import tempfile
 from collections.abc import Callable
 from contextlib import contextmanager, suppress
@@ -30,6 +31,24 @@ from .errors import SlamError
 DATA = Path(resources.files("helpers").joinpath("data"))  # files shipped in the package
 CACHE_VARIABLE = "HELPERS_CACHE"
 CACHE_NAME = "aerial-lidar-slam"  # the folder under the user's cache folder
+
+
+def input_file(path: str | Path, what: str) -> Path:
+    """``path`` if it is a regular file (a link to one included), else a
+    :class:`SlamError` saying what it is: missing, a folder, a broken link or
+    a loop of links, or a named pipe or device, which would block or never
+    end when read."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    if not os.path.lexists(path):
+        raise SlamError(f"{what} not found: {path}")
+    try:
+        mode = path.stat().st_mode
+    except OSError:  # a link to nothing, or links that point at each other
+        raise SlamError(f"{what} {path} is a broken link or a loop of links, not a file") from None
+    kind = "a folder" if stat.S_ISDIR(mode) else "a named pipe" if stat.S_ISFIFO(mode) else "a device or socket"
+    raise SlamError(f"{what} {path} is {kind}, not a file")
 
 
 def cache_dir() -> Path:

@@ -16,6 +16,7 @@ import numpy as np
 
 from .errors import SlamError
 from .limits import MAX_SCANS
+from .paths import input_file
 
 DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
 MAX_WAYPOINTS = MAX_SCANS  # one scan each
@@ -66,9 +67,7 @@ def loop_waypoints(
 def read_waypoints(path: str | Path) -> np.ndarray:
     """Read waypoints from ``.mat`` (``gTruthTraj``, N x 2 or N x 3) or
     ``.csv`` (x,y[,z] per line, an optional header line). Returns (N, 2|3)."""
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"waypoints file not found: {path}")
+    path = input_file(path, "waypoints file")
     suffix = path.suffix.lower()
     if suffix == ".mat":
         points = _read_mat(path)
@@ -192,7 +191,7 @@ def _read_csv(path: Path) -> np.ndarray:
     rows = []
     for number, line in lines:
         try:
-            rows.append([float(v) for v in line.split(",")])
+            rows.append([_number(v) for v in line.split(",")])
         except ValueError:
             raise SlamError(
                 f"{path.name} line {number}: every line must be x,y or x,y,z numbers, got {line[:40]!r}"
@@ -215,9 +214,17 @@ def _check_count(path: Path, n: int) -> None:
         raise SlamError(f"{path.name} holds {n:,} waypoints; the limit is {MAX_WAYPOINTS:,} (one scan each)")
 
 
+def _number(text: str) -> float:
+    """A CSV number. Python's float also reads "1_000" as 1000, which no
+    other program writes or reads so: such a cell is an error, not a value."""
+    if "_" in text:
+        raise ValueError(f"not a number: {text!r}")
+    return float(text)
+
+
 def _is_number(text: str) -> bool:
     try:
-        float(text)
+        _number(text)
     except ValueError:
         return False
     return True

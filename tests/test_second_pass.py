@@ -99,3 +99,61 @@ def test_sigterm_while_the_output_is_written_leaves_nothing(tmp_path):
     assert process.returncode == 128 + signal.SIGTERM, err
     assert err.strip().splitlines() == ["error: terminated"]
     assert list(tmp_path.iterdir()) == []
+
+
+# Inputs that are not what they claim -----------------------------------------
+
+
+@pytest.mark.parametrize("option", ["--map", "--waypoints", "--config"])
+@pytest.mark.parametrize("kind", ["a named pipe", "a folder", "a broken link or a loop of links", "a device or socket"])
+def test_an_input_that_is_not_a_file_is_named_for_what_it_is(tmp_path, capsys, option, kind):
+    """A FIFO must not hang the command, and a folder is not 'not found'."""
+    import os
+
+    suffix = {"--map": ".laz", "--waypoints": ".csv", "--config": ".toml"}[option]
+    path = tmp_path / f"input{suffix}"
+    if kind == "a named pipe":
+        os.mkfifo(path)
+    elif kind == "a folder":
+        path.mkdir()
+    elif kind == "a device or socket":
+        path.symlink_to("/dev/zero")
+    else:
+        path.symlink_to(tmp_path / f"other{suffix}")
+        (tmp_path / f"other{suffix}").symlink_to(path)
+    start = time.perf_counter()
+    assert main(["dataset", option, str(path), "--out", str(tmp_path / "o")]) == 2
+    what = {"--map": "map file", "--waypoints": "waypoints file", "--config": "config file"}[option]
+    assert _one_error_line(capsys, what).endswith(f"{path} is {kind}, not a file")
+    assert time.perf_counter() - start < 10
+    assert not (tmp_path / "o").exists()
+
+
+def test_the_message_names_the_kind(tmp_path):
+    from helpers.paths import input_file
+
+    (tmp_path / "d.laz").mkdir()
+    with pytest.raises(SlamError, match=r"^map file .*d\.laz is a folder, not a file$"):
+        input_file(tmp_path / "d.laz", "map file")
+
+
+def test_a_config_file_with_a_byte_order_mark_is_read(tmp_path):
+    """Windows editors write a UTF-8 byte-order mark first; TOML is UTF-8 and the mark is not a statement."""
+    from helpers.configfile import given_keys, load_config
+
+    path = tmp_path / "bom.toml"
+    path.write_bytes(b"\xef\xbb\xbf[sensor]\naltitude = 650.0\n")
+    assert load_config(path).sensor.altitude == 650.0
+    assert given_keys(path) == {("sensor", "altitude")}
+
+
+def test_a_csv_number_with_an_underscore_is_an_error_not_a_value(tmp_path):
+    """Python reads '1_20' as 120; a CSV reader must not."""
+    from helpers.waypoints import read_waypoints
+
+    path = tmp_path / "flight.csv"
+    path.write_text("x,y\n0,-120\n1_20,-120\n")
+    with pytest.raises(SlamError, match=r"flight\.csv line 3: .* got '1_20,-120'"):
+        read_waypoints(path)
+    path.write_text("x_m,y_m\n0,-120\n2,-120\n")  # a header may hold underscores
+    assert read_waypoints(path).shape == (2, 2)
