@@ -13,7 +13,12 @@ from pathlib import Path
 
 from .config import STAGE_TABLES, Config
 from .errors import SlamError
+from .limits import human_size
 from .paths import input_file
+
+# Every key of every table with a comment each is a few kilobytes; a larger file is not a configuration,
+# and reading it whole (twice: the values, then which keys were given) would take the memory and the time.
+MAX_CONFIG_BYTES = 1 << 20
 
 
 def load_config(path: str | Path | None = None) -> Config:
@@ -21,6 +26,12 @@ def load_config(path: str | Path | None = None) -> Config:
     if path is None:
         return Config()
     path = input_file(path, "config file")
+    size = path.stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise SlamError(
+            f"config file {path} is {human_size(size)}; a configuration is a few kilobytes "
+            f"(the limit is {human_size(MAX_CONFIG_BYTES)})"
+        )
     try:
         data = tomllib.loads(_read_text(path))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SlamError
-from .limits import MAX_SCANS
+from .limits import MAX_SCANS, human_size
 from .paths import input_file
 
 DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
@@ -30,6 +30,9 @@ MAT_CLASSES = {"char": "text", "cell": "a cell array or sparse matrix", "sparse"
 MAT_CLASSES |= {"struct": "a struct", "object": "a MATLAB object", "function_handle": "a function handle"}
 MAT_CLASSES |= {"complex": "complex numbers"}
 MI_MATRIX, MI_COMPRESSED = 14, 15  # MAT-file v5 data types: a matrix, a zlib-compressed element
+# A CSV line of three numbers of full double precision ("-1234567.123456789012,...") takes under 100 bytes:
+# a larger file holds more waypoints than a flight may have, and is refused before it is read into memory.
+MAX_CSV_BYTES = 100 * MAX_WAYPOINTS
 MAT_HEAD_BYTES = 1024  # of a matrix element: its flags, dimensions and name (a 63-character name, 200 dimensions)
 
 
@@ -181,6 +184,12 @@ def _matrix_header(element: bytes, order: str) -> tuple[str, tuple[int, ...], st
 def _read_csv(path: Path) -> np.ndarray:
     """x,y[,z] rows; a first row that holds no number is a header. Any other
     row that is not numbers is an error naming its line: none is dropped."""
+    size = path.stat().st_size
+    if size > MAX_CSV_BYTES:
+        raise SlamError(
+            f"{path.name} is {human_size(size)}, more than {MAX_WAYPOINTS:,} waypoints (one scan each) take; "
+            f"the limit is {human_size(MAX_CSV_BYTES)}"
+        )
     text = path.read_text(encoding="utf-8-sig", errors="replace")  # utf-8-sig: a byte-order mark is not data
     lines = [(number, line.strip()) for number, line in enumerate(text.splitlines(), 1) if line.strip()]
     if lines and not any(_is_number(cell) for cell in lines[0][1].split(",")):

@@ -157,3 +157,32 @@ def test_a_csv_number_with_an_underscore_is_an_error_not_a_value(tmp_path):
         read_waypoints(path)
     path.write_text("x_m,y_m\n0,-120\n2,-120\n")  # a header may hold underscores
     assert read_waypoints(path).shape == (2, 2)
+
+
+def test_a_config_file_far_larger_than_a_configuration_is_refused_unread(tmp_path, capsys):
+    from helpers.configfile import MAX_CONFIG_BYTES
+
+    path = tmp_path / "huge.toml"
+    with open(path, "wb") as f:
+        f.write(b"[sensor]\naltitude = 700.0\n# padding\n")
+        f.truncate(MAX_CONFIG_BYTES + 1)  # sparse: nothing kept on disk
+    start = time.perf_counter()
+    assert main(["dataset", "--config", str(path), "--out", str(tmp_path / "o")]) == 2
+    assert "a configuration is a few kilobytes (the limit is 1 MiB)" in _one_error_line(capsys, "config file")
+    assert time.perf_counter() - start < 5 and not (tmp_path / "o").exists()
+
+
+def test_a_csv_larger_than_the_most_waypoints_take_is_refused_unread(tmp_path):
+    from helpers.waypoints import MAX_CSV_BYTES, read_waypoints
+
+    path = tmp_path / "flight.csv"
+    with open(path, "wb") as f:
+        f.write(b"x,y\n0,-120\n2,-120\n")
+        f.truncate(MAX_CSV_BYTES + 1)  # sparse
+    import tracemalloc
+
+    tracemalloc.start()
+    with pytest.raises(SlamError, match=r"flight\.csv is 95\.4 MiB, more than 1,000,000 waypoints .* take"):
+        read_waypoints(path)
+    assert tracemalloc.get_traced_memory()[1] < 10 << 20  # never read in
+    tracemalloc.stop()
