@@ -186,3 +186,15 @@ def test_a_csv_larger_than_the_most_waypoints_take_is_refused_unread(tmp_path):
         read_waypoints(path)
     assert tracemalloc.get_traced_memory()[1] < 10 << 20  # never read in
     tracemalloc.stop()
+
+
+def test_waypoints_under_the_ground_are_named_before_anything_is_cast(tmp_path, capsys):
+    """The default scene's ground lies at 85 to 136 m: at 90 m some waypoints are inside its hills
+    (it said 'scans came back empty', or cast scans from under the surface)."""
+    flight = tmp_path / "flight.csv"
+    flight.write_text("x,y,z\n" + "\n".join(f"{2.0 * i},-120,{700 if i < 5 else 30}" for i in range(30)) + "\n")
+    assert main(["dataset", "--waypoints", str(flight), "--out", str(tmp_path / "o")]) == 2
+    line = _one_error_line(capsys, "25 of 30 waypoints lie at or below the map's surface (indices 5-29;")
+    assert "fly higher" in line and not (tmp_path / "o").exists()
+    with pytest.raises(SlamError, match=r"waypoints lie at or below the map's surface"):
+        helpers.create_dataset(sensor=helpers.SensorConfig(altitude=90.0))
