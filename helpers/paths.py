@@ -21,7 +21,7 @@ import socket
 import stat
 import tempfile
 from collections.abc import Callable
-from contextlib import contextmanager, suppress
+from contextlib import ExitStack, contextmanager, suppress
 from importlib import resources
 from pathlib import Path
 from typing import BinaryIO
@@ -73,10 +73,21 @@ MARKER_HEADER = "# Written by aerial-lidar-slam (python -m helpers):"
 def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = None) -> Path:
     """The resolved output folder ``out_dir`` of a command whose marker file
     is ``marker``, or a :class:`SlamError` saying why it cannot be written:
-    a file, under a file, a mount point, holding the current folder, holding
+    a file, under a file, a mount point, holding the current folder, inside
+    the cache folder (:func:`cache_dir`, deleted at will), holding
     anything the command did not write, or in a folder we may not write.
     ``legacy``: the file that marked an output of an older version (no list
-    of its files): such a folder is left for the user to delete by hand."""
+    of its files): such a folder is left for the user to delete by hand.
+    The check holds the parent folder's lock, as a writer's swap does, so
+    that it never sees another writer's output half replaced."""
+    with ExitStack() as stack:
+        with suppress(OSError):  # no parent folder yet (or one we may not open): nobody swaps there
+            stack.enter_context(_locked(Path(os.path.realpath(out_dir)).parent))
+        return _check_place(out_dir, marker, legacy)
+
+
+def _check_place(out_dir: str | Path, marker: str, legacy: str | None) -> Path:
+    """:func:`check_output_place` without the lock."""
     given = Path(out_dir)
     target = Path(os.path.realpath(given))  # symbolic links followed first, then "..", as the kernel does
     for ancestor in target.parents:
@@ -88,6 +99,12 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
         raise SlamError(f"output path {given} exists and is not a folder")
     if Path.cwd().is_relative_to(target):
         raise SlamError(f"output folder {given} holds the current folder: choose another")
+    cache = Path(os.path.realpath(cache_dir()))
+    if target.is_relative_to(cache):
+        raise SlamError(
+            f"output folder {given} lies inside the cache folder {cache}, which may be deleted at any time "
+            f"(${CACHE_VARIABLE}): choose another"
+        )
     if target.is_dir() and _is_mount_point(target):
         raise SlamError(f"output folder {given} is a mount point, which cannot be replaced: choose a folder inside it")
     try:
@@ -144,7 +161,7 @@ def atomic_dir(out_dir: str | Path, marker: str, legacy: str | None = None):
         yield work
         _write_marker(work, marker)
         with _locked(target.parent):
-            check_output_place(given, marker, legacy)  # the user may have put files there while we worked
+            _check_place(given, marker, legacy)  # the user may have put files there while we worked
             _swap(work, target)
     except BaseException as exc:
         if work is not None:

@@ -198,3 +198,15 @@ def test_waypoints_under_the_ground_are_named_before_anything_is_cast(tmp_path, 
     assert "fly higher" in line and not (tmp_path / "o").exists()
     with pytest.raises(SlamError, match=r"waypoints lie at or below the map's surface"):
         helpers.create_dataset(sensor=helpers.SensorConfig(altitude=90.0))
+
+
+# Output places ----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("inside", ["", "runs/mine", "maps"])
+def test_an_output_inside_the_cache_is_refused(tmp_path, capsys, inside):
+    """The cache may be deleted at any time (paths.cache_dir says so): a result written there would go with it."""
+    out = tmp_path / "cache" / inside  # HELPERS_CACHE points there (tests/conftest.py)
+    assert main(["dataset", "--out", str(out)]) == 2
+    assert "lies inside the cache folder" in _one_error_line(capsys, f"output folder {out}")
+    assert not (tmp_path / "cache" / "runs").exists()
