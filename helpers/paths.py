@@ -73,7 +73,7 @@ MARKER_HEADER = "# Written by aerial-lidar-slam (python -m helpers):"
 def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = None) -> Path:
     """The resolved output folder ``out_dir`` of a command whose marker file
     is ``marker``, or a :class:`SlamError` saying why it cannot be written:
-    a file, under a file, a mount point, holding the current folder, inside
+    a file, under a file, a mount point, an unexpanded ``~``, holding the current folder, inside
     the cache folder (:func:`cache_dir`, deleted at will), holding
     anything the command did not write, or in a folder we may not write.
     ``legacy``: the file that marked an output of an older version (no list
@@ -89,6 +89,11 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
 def _check_place(out_dir: str | Path, marker: str, legacy: str | None) -> Path:
     """:func:`check_output_place` without the lock."""
     given = Path(out_dir)
+    if given.parts and given.parts[0].startswith("~") and not os.path.lexists(given.parts[0]):
+        raise SlamError(  # a folder named "~" in the current one, which a later "rm -rf ~" would take for home
+            f"output folder {given} starts with {given.parts[0]}, which the shell did not expand (it was quoted, "
+            f"or followed '='): write {os.path.expanduser(given.parts[0])} instead"
+        )
     target = Path(os.path.realpath(given))  # symbolic links followed first, then "..", as the kernel does
     for ancestor in target.parents:
         if os.path.lexists(ancestor):

@@ -210,3 +210,11 @@ def test_an_output_inside_the_cache_is_refused(tmp_path, capsys, inside):
     assert main(["dataset", "--out", str(out)]) == 2
     assert "lies inside the cache folder" in _one_error_line(capsys, f"output folder {out}")
     assert not (tmp_path / "cache" / "runs").exists()
+
+
+def test_an_unexpanded_tilde_is_refused_not_made_into_a_folder(tmp_path, capsys, monkeypatch):
+    """--out "~/runs/a" (quoted) made a folder named "~" in the current one."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["dataset", "--out", "~/runs/a"]) == 2
+    assert "which the shell did not expand" in _one_error_line(capsys, "output folder ~/runs/a starts with ~")
+    assert not (tmp_path / "~").exists()
