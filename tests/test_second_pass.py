@@ -218,3 +218,55 @@ def test_an_unexpanded_tilde_is_refused_not_made_into_a_folder(tmp_path, capsys,
     assert main(["dataset", "--out", "~/runs/a"]) == 2
     assert "which the shell did not expand" in _one_error_line(capsys, "output folder ~/runs/a starts with ~")
     assert not (tmp_path / "~").exists()
+
+
+# LAS units ----------------------------------------------------------------------
+
+WKT2_FEET = (  # WKT2 names the ellipsoid's unit (metres) before the coordinates' own (feet)
+    'PROJCRS["NAD83 / Oregon GIC Lambert (ft)",BASEGEOGCRS["NAD83",DATUM["North American Datum 1983",'
+    'ELLIPSOID["GRS 1980",6378137,298.257222101,LENGTHUNIT["metre",1]]],'
+    'PRIMEM["Greenwich",0,ANGLEUNIT["degree",0.0174532925199433]]],CONVERSION["Lambert",METHOD["LCC"]],'
+    'CS[Cartesian,2],AXIS["easting",east,LENGTHUNIT["foot",0.3048]],AXIS["northing",north,LENGTHUNIT["foot",0.3048]]]'
+)
+WKT1_METRES = 'PROJCS["x",GEOGCS["g",UNIT["degree",0.0174532925199433]],UNIT["metre",1.0]]'
+
+
+def _tile_with_crs(path, geo_unit=None, wkt=None):
+    """A 50 x 50 unit tile whose CRS records are a GeoTIFF linear-unit key (an EPSG code) and/or a WKT."""
+    import laspy
+    from laspy.vlrs.known import GeoKeyDirectoryVlr, GeoKeyEntryStruct, WktCoordinateSystemVlr
+
+    header = laspy.LasHeader(point_format=6, version="1.4")
+    header.scales = [0.01] * 3
+    if geo_unit:
+        keys = GeoKeyDirectoryVlr()
+        keys.geo_keys_header.number_of_keys = 1
+        key = GeoKeyEntryStruct()
+        key.id, key.tiff_tag_location, key.count, key.value_offset = 3076, 0, 1, geo_unit  # ProjLinearUnitsGeoKey
+        keys.geo_keys = [key]
+        header.vlrs.append(keys)
+    if wkt:
+        header.vlrs.append(WktCoordinateSystemVlr(wkt))
+    las = laspy.LasData(header)
+    x, y = np.meshgrid(np.arange(50.0), np.arange(50.0))
+    las.x, las.y, las.z = x.ravel(), y.ravel(), np.zeros(x.size)
+    las.write(path)
+    return path
+
+
+def test_a_wkt2_tile_in_feet_is_read_in_feet(tmp_path):
+    """The ellipsoid's LENGTHUNIT["metre"] came first and the tile was read as metres, 3.28 times too large."""
+    from helpers.mapio import read_map
+
+    tile = read_map(_tile_with_crs(tmp_path / "ft.las", wkt=WKT2_FEET))
+    assert tile.frame.unit_name == "foot"
+    assert np.ptp(tile.points[:, 0]) == pytest.approx(49 * 0.3048)
+
+
+def test_crs_records_that_disagree_on_the_unit_are_refused(tmp_path):
+    """GeoTIFF keys in feet (EPSG 9002) beside a WKT in metres: one is wrong, and which cannot be told."""
+    from helpers.mapio import read_map
+
+    with pytest.raises(SlamError, match="disagree on its unit: the GeoTIFF keys say foot, the WKT says metre"):
+        read_map(_tile_with_crs(tmp_path / "mixed.las", geo_unit=9002, wkt=WKT1_METRES))
+    assert read_map(_tile_with_crs(tmp_path / "same.las", geo_unit=9002, wkt=WKT2_FEET)).frame.unit_name == "foot"
