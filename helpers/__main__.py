@@ -9,13 +9,35 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
+import threading
 import time
 
 from .errors import SlamError
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (a ``kill``, a job scheduler, a container stopping) raised as
+    Ctrl-C is, so that what the command began is removed on the way out."""
+
+
 def main(argv=None) -> int:
+    """The command line; SIGTERM is handled as Ctrl-C while it runs."""
+    if threading.current_thread() is not threading.main_thread():  # signal handlers live in the main thread
+        return _main(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    try:
+        return _main(argv)
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def _terminate(signum, frame):
+    raise Terminated
+
+
+def _main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="python -m helpers", description=__doc__.splitlines()[0])
     parser.add_argument("-v", "--verbose", action="store_true", help="log what each stage does")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -58,9 +80,9 @@ def main(argv=None) -> int:
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{exc.strerror or exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("error: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        print(f"error: {'terminated' if isinstance(exc, Terminated) else 'interrupted'}", file=sys.stderr)
+        return 128 + (signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)
     return 1
 
 
@@ -92,7 +114,7 @@ def _run(args) -> int:
     from .configfile import given_keys, load_config
     from .dataset import create_dataset
     from .evaluation import map_errors, run_metrics
-    from .fitting import fit_to_flight, flight_of
+    from .fitting import check_grid_steps, fit_to_flight, flight_of
     from .health import assess
     from .output import LEGACY_MARKER, MARKER, write_run
     from .paths import check_output_place
@@ -104,9 +126,11 @@ def _run(args) -> int:
     interactive = sys.stderr.isatty()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
     created = time.perf_counter() - start
+    flight = flight_of(data)
     if not args.reference_values:
-        flight = flight_of(data)
         config, reasons = fit_to_flight(flight, config, given_keys(args.config))
+    check_grid_steps(flight, config)  # before a word about the fit: a refused run prints only its error
+    if not args.reference_values:
         print(
             f"parameters fitted to the flight ({flight.height:.0f} m above the ground, a waypoint every "
             f"{flight.spacing:.1f} m; --reference-values keeps the reference's):"

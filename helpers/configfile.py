@@ -13,6 +13,12 @@ from pathlib import Path
 
 from .config import STAGE_TABLES, Config, noise_seed_from_environment
 from .errors import SlamError
+from .limits import human_size
+from .paths import input_file
+
+# Every key of every table with a comment each is a few kilobytes; a larger file is not a configuration,
+# and reading it whole (twice: the values, then which keys were given) would take the memory and the time.
+MAX_CONFIG_BYTES = 1 << 20
 
 
 def load_config(path: str | Path | None = None) -> Config:
@@ -21,11 +27,15 @@ def load_config(path: str | Path | None = None) -> Config:
     :func:`~helpers.config.noise_seed_from_environment`'s (the CLI's entry)."""
     if path is None:
         return Config().with_values(sensor={"seed": noise_seed_from_environment()})
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"config file not found: {path}")
+    path = input_file(path, "config file")
+    size = path.stat().st_size
+    if size > MAX_CONFIG_BYTES:
+        raise SlamError(
+            f"config file {path} is {human_size(size)}; a configuration is a few kilobytes "
+            f"(the limit is {human_size(MAX_CONFIG_BYTES)})"
+        )
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(_read_text(path))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SlamError(f"config file {path} is not valid TOML: {exc}") from None
     except RecursionError:
@@ -56,8 +66,13 @@ def given_keys(path: str | Path | None) -> frozenset[tuple[str, str]]:
     """The ``(table, key)`` pairs a TOML file sets (none without a file); read after :func:`load_config`."""
     if path is None:
         return frozenset()
-    data = tomllib.loads(Path(path).read_text())
+    data = tomllib.loads(_read_text(Path(path)))
     return frozenset((table, key) for table, values in data.items() for key in values)
+
+
+def _read_text(path: Path) -> str:
+    """A TOML file's text: UTF-8, as TOML is, with the byte-order mark some editors write first taken away."""
+    return path.read_text(encoding="utf-8-sig")
 
 
 def config_to_dict(config: Config, tables=STAGE_TABLES) -> dict:

@@ -20,7 +20,7 @@ from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
 from .progress import progress_bar
 from .scene import HeightField, default_scene
-from .sensor import ScanBatch, Surface, cast_scans, check_coverage, index_ranges, poses_from_waypoints
+from .sensor import ScanBatch, Surface, cast_scans, check_coverage, check_heights, index_ranges, poses_from_waypoints
 from .trajectory import write_tum
 from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
 
@@ -139,6 +139,7 @@ def create_dataset(
         xyz = _with_altitude(fitted_loop(field), sensor)
 
     check_coverage(field, xyz)
+    check_heights(field, xyz)
     sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
     surface = Surface.from_height_field(field)

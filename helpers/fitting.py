@@ -41,6 +41,12 @@ REFERENCE_LOOP_AGE = (  # m flown before a place can close a loop: sub_map_thres
     * REFERENCE_SPACING
 )
 GRID_ROUNDING = 0.05  # m: fitted grid steps are multiples of this
+# A grid step is the spacing of the points that registration and the map keep. With fewer than five cells
+# across the narrow side of a scan's footprint, a scan shrinks to a few rows of points, a line more than a
+# surface, whose normals, descriptors and ICP cannot pin the motion; the map becomes a handful of points.
+# Five cells leave the reference's values room on flights four times lower than its own (150 m: a 13 m strip).
+GRID_CELLS_ACROSS = 5
+GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("map", "align_grid_step"))
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,28 @@ def flight_of(dataset) -> Flight:
     start, stop, _ = dataset.sensor.elevation
     strip = height * (math.tan(math.radians(stop)) - math.tan(math.radians(start)))
     return Flight(height, spacing, float(field.cell), strip)
+
+
+def check_grid_steps(flight: Flight, config: Config) -> None:
+    """Refuse a grid step coarser than the scans' footprint allows: more than
+    1 / :data:`GRID_CELLS_ACROSS` of its narrow side (the strip along the
+    track, or the swath across it, at the flight's height). A flight not
+    above the ground has no footprint: :func:`fit_to_flight` refuses it."""
+    if not flight.height > 0:
+        return
+    start, stop, _ = config.sensor.azimuth
+    swath = flight.height * (math.tan(math.radians(stop)) - math.tan(math.radians(start)))
+    narrow = min(flight.strip, swath)
+    limit = narrow / GRID_CELLS_ACROSS
+    for table, key in GRID_STEPS:
+        value = getattr(getattr(config, table), key)
+        if value > limit:  # icp_grid_step 0 (the feature clouds) always passes
+            raise SlamError(
+                f"[{table}] {key} = {value:g} m is too coarse for this flight: its scans cover "
+                f"{flight.strip:.1f} m along the track and {swath:.1f} m across ({flight.height:.0f} m above the "
+                f"ground), and a grid step may be at most 1/{GRID_CELLS_ACROSS} of the narrower, {limit:.2f} m: "
+                "choose a finer one, or fly higher"
+            )
 
 
 def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Config, list[str]]:

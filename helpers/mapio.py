@@ -72,9 +72,7 @@ class AerialMap:
 
 def read_map(path: str | Path) -> AerialMap:
     """Read a ``.las``, ``.laz`` or ``.tar.gz`` holding one."""
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"map file not found: {path}")
+    path = paths.input_file(path, "map file")
     name = path.name.lower()
     if name.endswith((".tar.gz", ".tgz")):
         tile = _extract_las(path)
@@ -126,17 +124,21 @@ def _units(header) -> tuple[float, float, str]:
                 horizontal = LINEAR_UNITS[key.value_offset]
             if key.id == 4099 and key.value_offset in LINEAR_UNITS:  # VerticalUnitsGeoKey
                 vertical = LINEAR_UNITS[key.value_offset]
-    if horizontal is None:
-        for vlr in list(header.vlrs) + list(header.evlrs or []):
-            wkt = getattr(vlr, "string", None)
-            if isinstance(wkt, bytes):
-                wkt = wkt.decode("ascii", "replace")
-            if wkt:
-                linear = _wkt_linear_units(wkt)
-                if linear:
-                    horizontal = linear[0]
-                    vertical = vertical or (linear[1] if len(linear) > 1 else None)
-                    break
+    for vlr in list(header.vlrs) + list(header.evlrs or []):
+        wkt = getattr(vlr, "string", None)
+        if isinstance(wkt, bytes):
+            wkt = wkt.decode("ascii", "replace")
+        linear = _wkt_linear_units(wkt) if wkt else []
+        if linear:
+            if horizontal is not None and abs(linear[0] - horizontal) > 1e-9 * horizontal:
+                raise SlamError(  # one of them is wrong, and a map read in the wrong unit is 3.28 times off
+                    f"the tile's CRS records disagree on its unit: the GeoTIFF keys say {_unit_name(horizontal)}, "
+                    f"the WKT says {_unit_name(linear[0])}: fix the header (e.g. with PDAL's writers.las a_srs)"
+                )
+            if horizontal is None:
+                horizontal = linear[0]
+                vertical = vertical or (linear[1] if len(linear) > 1 else None)
+            break
     if horizontal is None:
         log.warning("no unit in the LAS header's CRS records: assuming metres")
         horizontal = 1.0
@@ -144,9 +146,13 @@ def _units(header) -> tuple[float, float, str]:
     return horizontal, vertical, _unit_name(horizontal)
 
 
+ELLIPSOID = re.compile(r"(?:ELLIPSOID|SPHEROID)\[[^\[\]]*(?:\[[^\[\]]*\][^\[\]]*)*\]")
+
+
 def _wkt_linear_units(wkt: str) -> list[float]:
     """Linear UNIT factors in order of appearance (angular units skipped)."""
     factors = []
+    wkt = ELLIPSOID.sub("", wkt)  # WKT2 gives the ellipsoid's axes a LENGTHUNIT before the coordinates' own
     for name, factor in re.findall(r'(?:LENGTH)?UNIT\["([^"]+)"\s*,\s*([0-9.eE+-]+)', wkt):
         if "degree" in name.lower() or "radian" in name.lower():
             continue

@@ -18,9 +18,10 @@ import os
 import re
 import shutil
 import socket
+import stat
 import tempfile
 from collections.abc import Callable
-from contextlib import contextmanager, suppress
+from contextlib import ExitStack, contextmanager, suppress
 from importlib import resources
 from pathlib import Path
 from typing import BinaryIO
@@ -30,6 +31,24 @@ from .errors import SlamError
 DATA = Path(resources.files("helpers").joinpath("data"))  # files shipped in the package
 CACHE_VARIABLE = "HELPERS_CACHE"
 CACHE_NAME = "aerial-lidar-slam"  # the folder under the user's cache folder
+
+
+def input_file(path: str | Path, what: str) -> Path:
+    """``path`` if it is a regular file (a link to one included), else a
+    :class:`SlamError` saying what it is: missing, a folder, a broken link or
+    a loop of links, or a named pipe or device, which would block or never
+    end when read."""
+    path = Path(path)
+    if path.is_file():
+        return path
+    if not os.path.lexists(path):
+        raise SlamError(f"{what} not found: {path}")
+    try:
+        mode = path.stat().st_mode
+    except OSError:  # a link to nothing, or links that point at each other
+        raise SlamError(f"{what} {path} is a broken link or a loop of links, not a file") from None
+    kind = "a folder" if stat.S_ISDIR(mode) else "a named pipe" if stat.S_ISFIFO(mode) else "a device or socket"
+    raise SlamError(f"{what} {path} is {kind}, not a file")
 
 
 def cache_dir() -> Path:
@@ -54,11 +73,27 @@ MARKER_HEADER = "# Written by aerial-lidar-slam (python -m helpers):"
 def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = None) -> Path:
     """The resolved output folder ``out_dir`` of a command whose marker file
     is ``marker``, or a :class:`SlamError` saying why it cannot be written:
-    a file, under a file, a mount point, holding the current folder, holding
+    a file, under a file, a mount point, an unexpanded ``~``, holding the current folder, inside
+    the cache folder (:func:`cache_dir`, deleted at will), holding
     anything the command did not write, or in a folder we may not write.
     ``legacy``: the file that marked an output of an older version (no list
-    of its files): such a folder is left for the user to delete by hand."""
+    of its files): such a folder is left for the user to delete by hand.
+    The check holds the parent folder's lock, as a writer's swap does, so
+    that it never sees another writer's output half replaced."""
+    with ExitStack() as stack:
+        with suppress(OSError):  # no parent folder yet (or one we may not open): nobody swaps there
+            stack.enter_context(_locked(Path(os.path.realpath(out_dir)).parent))
+        return _check_place(out_dir, marker, legacy)
+
+
+def _check_place(out_dir: str | Path, marker: str, legacy: str | None) -> Path:
+    """:func:`check_output_place` without the lock."""
     given = Path(out_dir)
+    if given.parts and given.parts[0].startswith("~") and not os.path.lexists(given.parts[0]):
+        raise SlamError(  # a folder named "~" in the current one, which a later "rm -rf ~" would take for home
+            f"output folder {given} starts with {given.parts[0]}, which the shell did not expand (it was quoted, "
+            f"or followed '='): write {os.path.expanduser(given.parts[0])} instead"
+        )
     target = Path(os.path.realpath(given))  # symbolic links followed first, then "..", as the kernel does
     for ancestor in target.parents:
         if os.path.lexists(ancestor):
@@ -69,6 +104,12 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
         raise SlamError(f"output path {given} exists and is not a folder")
     if Path.cwd().is_relative_to(target):
         raise SlamError(f"output folder {given} holds the current folder: choose another")
+    cache = Path(os.path.realpath(cache_dir()))
+    if target.is_relative_to(cache):
+        raise SlamError(
+            f"output folder {given} lies inside the cache folder {cache}, which may be deleted at any time "
+            f"(${CACHE_VARIABLE}): choose another"
+        )
     if target.is_dir() and _is_mount_point(target):
         raise SlamError(f"output folder {given} is a mount point, which cannot be replaced: choose a folder inside it")
     try:
@@ -125,7 +166,7 @@ def atomic_dir(out_dir: str | Path, marker: str, legacy: str | None = None):
         yield work
         _write_marker(work, marker)
         with _locked(target.parent):
-            check_output_place(given, marker, legacy)  # the user may have put files there while we worked
+            _check_place(given, marker, legacy)  # the user may have put files there while we worked
             _swap(work, target)
     except BaseException as exc:
         if work is not None:

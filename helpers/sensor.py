@@ -178,6 +178,20 @@ def check_coverage(field: HeightField, waypoints: np.ndarray) -> None:
         )
 
 
+def check_heights(field: HeightField, waypoints: np.ndarray) -> None:
+    """Refuse waypoints (N, 3) at or below the surface under them, naming
+    them: a lidar under the ground sees nothing, or the surface's underside
+    in a valley beyond, and either way no scan of the map."""
+    ground = field.z[field.cell_of(waypoints)]
+    below = np.flatnonzero(waypoints[:, 2] <= ground)
+    if len(below):
+        raise SlamError(
+            f"{len(below)} of {len(waypoints)} waypoints lie at or below the map's surface (indices "
+            f"{index_ranges(below)}; the surface under them reaches {ground[below].max():.1f} m): fly higher "
+            "([sensor] altitude, or the waypoints' z)"
+        )
+
+
 def index_ranges(indices: np.ndarray) -> str:
     """'3-7, 12, 40-41' for [3, 4, 5, 6, 7, 12, 40, 41]."""
     if len(indices) == 0:

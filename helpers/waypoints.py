@@ -15,7 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SlamError
-from .limits import MAX_SCANS
+from .limits import MAX_SCANS, human_size
+from .paths import input_file
 
 DEFAULT_SPACING = 2.0  # m between waypoints, as in the reference trajectory
 MAX_WAYPOINTS = MAX_SCANS  # one scan each
@@ -29,6 +30,9 @@ MAT_CLASSES = {"char": "text", "cell": "a cell array or sparse matrix", "sparse"
 MAT_CLASSES |= {"struct": "a struct", "object": "a MATLAB object", "function_handle": "a function handle"}
 MAT_CLASSES |= {"complex": "complex numbers"}
 MI_MATRIX, MI_COMPRESSED = 14, 15  # MAT-file v5 data types: a matrix, a zlib-compressed element
+# A CSV line of three numbers of full double precision ("-1234567.123456789012,...") takes under 100 bytes:
+# a larger file holds more waypoints than a flight may have, and is refused before it is read into memory.
+MAX_CSV_BYTES = 100 * MAX_WAYPOINTS
 MAT_HEAD_BYTES = 1024  # of a matrix element: its flags, dimensions and name (a 63-character name, 200 dimensions)
 
 
@@ -66,9 +70,7 @@ def loop_waypoints(
 def read_waypoints(path: str | Path) -> np.ndarray:
     """Read waypoints from ``.mat`` (``gTruthTraj``, N x 2 or N x 3) or
     ``.csv`` (x,y[,z] per line, an optional header line). Returns (N, 2|3)."""
-    path = Path(path)
-    if not path.is_file():
-        raise SlamError(f"waypoints file not found: {path}")
+    path = input_file(path, "waypoints file")
     suffix = path.suffix.lower()
     if suffix == ".mat":
         points = _read_mat(path)
@@ -182,6 +184,12 @@ def _matrix_header(element: bytes, order: str) -> tuple[str, tuple[int, ...], st
 def _read_csv(path: Path) -> np.ndarray:
     """x,y[,z] rows; a first row that holds no number is a header. Any other
     row that is not numbers is an error naming its line: none is dropped."""
+    size = path.stat().st_size
+    if size > MAX_CSV_BYTES:
+        raise SlamError(
+            f"{path.name} is {human_size(size)}, more than {MAX_WAYPOINTS:,} waypoints (one scan each) take; "
+            f"the limit is {human_size(MAX_CSV_BYTES)}"
+        )
     text = path.read_text(encoding="utf-8-sig", errors="replace")  # utf-8-sig: a byte-order mark is not data
     lines = [(number, line.strip()) for number, line in enumerate(text.splitlines(), 1) if line.strip()]
     if lines and not any(_is_number(cell) for cell in lines[0][1].split(",")):
@@ -192,7 +200,7 @@ def _read_csv(path: Path) -> np.ndarray:
     rows = []
     for number, line in lines:
         try:
-            rows.append([float(v) for v in line.split(",")])
+            rows.append([_number(v) for v in line.split(",")])
         except ValueError:
             raise SlamError(
                 f"{path.name} line {number}: every line must be x,y or x,y,z numbers, got {line[:40]!r}"
@@ -215,9 +223,17 @@ def _check_count(path: Path, n: int) -> None:
         raise SlamError(f"{path.name} holds {n:,} waypoints; the limit is {MAX_WAYPOINTS:,} (one scan each)")
 
 
+def _number(text: str) -> float:
+    """A CSV number. Python's float also reads "1_000" as 1000, which no
+    other program writes or reads so: such a cell is an error, not a value."""
+    if "_" in text:
+        raise ValueError(f"not a number: {text!r}")
+    return float(text)
+
+
 def _is_number(text: str) -> bool:
     try:
-        float(text)
+        _number(text)
     except ValueError:
         return False
     return True
