@@ -2,7 +2,7 @@
 
 Errors in the input end in one line on stderr and exit code 2, never a
 traceback, and never a half-written output folder. The output folder is
-checked before any work starts (:func:`helpers.paths.check_output_place`).
+checked before any work starts (:func:`helpers.outdir.check_output_place`).
 """
 
 from __future__ import annotations
@@ -95,7 +95,7 @@ def _map_arguments(parser: argparse.ArgumentParser) -> None:
 def _dataset(args) -> int:
     from .configfile import load_config
     from .dataset import LEGACY_MARKER, MARKER, create_dataset, write_dataset
-    from .paths import check_output_place
+    from .outdir import check_output_place
 
     check_output_place(args.out, MARKER, LEGACY_MARKER)
     config = load_config(args.config)
@@ -116,8 +116,8 @@ def _run(args) -> int:
     from .evaluation import map_errors, run_metrics
     from .fitting import check_grid_steps, fit_to_flight, flight_of
     from .health import assess
+    from .outdir import check_output_place
     from .output import LEGACY_MARKER, MARKER, write_run
-    from .paths import check_output_place
     from .pipeline import run_slam
 
     check_output_place(args.out, MARKER, LEGACY_MARKER)

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import paths
+from . import outdir, paths
 from .config import Config, SensorConfig, noise_seed_from_environment
 from .configfile import config_to_toml
 from .errors import SlamError
@@ -197,8 +197,8 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
     and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
     written in a temporary folder beside it that replaces it at the end. An
     existing ``out_dir`` is replaced only if it is empty or an earlier
-    dataset (:func:`helpers.paths.atomic_dir`)."""
-    with paths.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
+    dataset (:func:`helpers.outdir.atomic_dir`)."""
+    with outdir.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
         (work / "scans").mkdir()
         bar = progress_bar(len(dataset), "writing scans", enabled=progress)
         for index, scan in enumerate(dataset.scans):

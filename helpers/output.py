@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import paths
+from . import outdir
 from .configfile import config_to_dict, config_to_toml
 from .pipeline import SlamResult
 from .plyio import write_ply
@@ -24,9 +24,9 @@ def write_run(result: SlamResult, out_dir, metrics: dict, poses_gt: np.ndarray) 
     (K, 4, 4), one per node), the odometry and the optimised poses (one line
     per accepted scan, its dataset index as the stamp), ``map.ply`` and the
     ``config.toml`` used, all or nothing, into a folder that is new, empty
-    or an earlier run's (:func:`helpers.paths.atomic_dir`)."""
+    or an earlier run's (:func:`helpers.outdir.atomic_dir`)."""
     metrics = {**metrics, "config": config_to_dict(result.config)}
-    with paths.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
+    with outdir.atomic_dir(out_dir, MARKER, LEGACY_MARKER) as work:
         (work / "metrics.json").write_text(json.dumps(metrics, indent=2, allow_nan=False) + "\n")
         for name, poses in (
             ("gt", poses_gt),

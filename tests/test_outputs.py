@@ -22,12 +22,12 @@ import pytest
 import helpers
 import helpers.configfile
 import helpers.dataset
-import helpers.paths
+import helpers.outdir
 from helpers.__main__ import main
 from helpers.dataset import MARKER as DATASET_MARKER
 from helpers.errors import SlamError
+from helpers.outdir import atomic_dir
 from helpers.output import MARKER as RUN_MARKER
-from helpers.paths import atomic_dir
 from helpers.site import build as site_module
 
 REPO = Path(__file__).resolve().parents[1]
@@ -254,7 +254,7 @@ def test_a_failed_swap_puts_the_previous_output_back(tmp_path, tiny_dataset, mon
             raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), str(target))
         real_rename(source, target)
 
-    monkeypatch.setattr(helpers.paths.os, "rename", busy)
+    monkeypatch.setattr(helpers.outdir.os, "rename", busy)
     with pytest.raises(SlamError, match=r"^cannot write output folder .*/ds: Device or resource busy$"):
         helpers.write_dataset(tiny_dataset, out)
     monkeypatch.undo()
@@ -275,7 +275,7 @@ def test_any_oserror_from_a_command_is_one_error_line(capsys, monkeypatch, tmp_p
 WRITER = """
 import sys, time
 from pathlib import Path
-from helpers.paths import atomic_dir
+from helpers.outdir import atomic_dir
 out, name, go = Path(sys.argv[1]), sys.argv[2], Path(sys.argv[3])
 while not go.exists():
     time.sleep(0.001)
@@ -321,7 +321,7 @@ def test_an_output_folder_has_the_users_usual_mode(tmp_path, umask):
 
 KILLED = """
 import sys, time
-from helpers.paths import atomic_dir
+from helpers.outdir import atomic_dir
 with atomic_dir(sys.argv[1], ".m") as work:
     (work / "half.txt").write_text("half")
     print("writing", flush=True)
@@ -340,7 +340,7 @@ def test_the_temporary_folder_of_a_killed_writer_goes_at_the_next_write(tmp_path
     left = _hidden(place)
     assert len(left) == 1 and f".{writer.pid}." in left[0]
     # What is not a dead writer's of this host stays: a user's folder, another host's, a live process's.
-    live = f".out.helpers-partial.{helpers.paths._host()}.{os.getpid()}.0123abcd"
+    live = f".out.helpers-partial.{helpers.outdir._host()}.{os.getpid()}.0123abcd"
     keep = [".out.notes", f".out.helpers-partial.otherhost.{writer.pid}.0123abcd", live, ".out.helpers-partial.x"]
     for name in keep:
         (place / name).mkdir()
@@ -351,7 +351,7 @@ def test_the_temporary_folder_of_a_killed_writer_goes_at_the_next_write(tmp_path
 
 SCRATCH = """
 import time
-from helpers.paths import scratch_dir
+from helpers.outdir import scratch_dir
 with scratch_dir("helpers-book") as folder:
     (folder / "page.html").write_text("half")
     print("writing", flush=True)
@@ -368,7 +368,7 @@ def test_the_scratch_folder_of_a_killed_book_build_goes_at_the_next_build(tmp_pa
     left = [p.name for p in tmp_path.iterdir() if p.name.startswith(".helpers-book.")]
     assert len(left) == 1 and f".{writer.pid}." in left[0]
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
-    with helpers.paths.scratch_dir("helpers-book") as folder:
+    with helpers.outdir.scratch_dir("helpers-book") as folder:
         assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".helpers-book.")] == [folder.name]
     assert not folder.exists()
 

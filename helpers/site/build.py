@@ -22,7 +22,7 @@ import warnings
 from pathlib import Path
 from unittest import mock
 
-from .. import paths
+from .. import outdir
 from ..errors import SlamError
 from ..viz.display import KERNEL_ENVIRONMENT
 
@@ -126,7 +126,7 @@ def solution_paths() -> list[Path]:
 def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path:
     """Execute (optionally) the notebooks and build the book; returns its index.html."""
     chapters, solutions = notebook_paths(), solution_paths()
-    with paths.atomic_dir(out_dir, MARKER) as work, paths.scratch_dir("helpers-book") as tmp:
+    with outdir.atomic_dir(out_dir, MARKER) as work, outdir.scratch_dir("helpers-book") as tmp:
         source = tmp / "source"
         source.mkdir()
         (source / SOLUTIONS).mkdir()
