@@ -335,6 +335,16 @@ def test_a_display_formula_inside_a_list_item_is_typeset(book, browser):
     assert found == [{"display": 1, "dollars": False}], f"the RPE formula in its bullet: {found}"
 
 
+def test_chapter_2s_parameter_table_fits_the_text_column_on_a_desktop(book, browser):
+    browser.resize(1300, 900)
+    browser.open((book.parent / "02_parameters.html").resolve().as_uri())
+    table, column = browser.evaluate("""(() => {
+      const table = document.querySelector('article table');
+      return [table.getBoundingClientRect().width, document.querySelector('article').getBoundingClientRect().width];
+    })()""")
+    assert table <= column, f"the parameter table is {table:.0f} px wide in a {column:.0f} px column"
+
+
 def test_code_cells_have_a_copy_button_from_the_books_own_script(book, browser):
     page = book.parent / "03_registration.html"
     loaded = [unquote(urlsplit(src).path) for src in _parse(page).resources]

@@ -62,6 +62,14 @@ FATAL_WARNINGS = re.compile(
 
 ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
 
+# The book's own style: a table a cell prints (chapter 2's parameters) fits the text column in a smaller type,
+# its long names (code) breaking where they must, instead of running off to the right.
+STYLE_SHEET = "book.css"
+STYLE = """.cell_output table { font-size: 0.8rem; }
+.cell_output table th, .cell_output table td { padding: 0.3rem 0.4rem; }
+.cell_output table code, .cell_output table code span { overflow-wrap: anywhere; white-space: normal; }
+"""
+
 # The generated conf.py: everything Sphinx is told.
 CONF = {
     "project": TITLE,
@@ -96,7 +104,8 @@ CONF = {
     },
     "html_theme": "sphinx_book_theme",
     "html_title": TITLE,
-    "html_static_path": [],
+    "html_static_path": ["_static"],  # the book's style sheet, STYLE below
+    "html_css_files": [STYLE_SHEET],
     "html_show_sphinx": False,
     "html_theme_options": {
         "home_page_in_toc": True,
@@ -144,6 +153,8 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         picture = (source / RESULT_PICTURE).is_file()
         (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
+        (source / "_static").mkdir()
+        (source / "_static" / STYLE_SHEET).write_text(STYLE, encoding="utf-8")
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
         built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
