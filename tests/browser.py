@@ -144,6 +144,11 @@ class Browser:
         self.call("Emulation.setDeviceMetricsOverride", session=True, width=width, height=height,
                   deviceScaleFactor=1, mobile=False)  # fmt: skip
 
+    def click(self, x: float, y: float) -> None:
+        """A left click at (x, y) in the viewport, as a user's (a script's click() is not a user gesture)."""
+        for kind in ("mouseMoved", "mousePressed", "mouseReleased"):
+            self.call("Input.dispatchMouseEvent", session=True, type=kind, x=x, y=y, button="left", clickCount=1)
+
     def failed(self) -> list[str]:
         """The URLs the page could not load since it was opened, each with why."""
         urls = {e["params"]["requestId"]: e["params"]["request"]["url"]

@@ -4,7 +4,9 @@ page's sidebar, previous/next links in reading order, a search, every picture
 a local file that shows something, the scan player with its frames, and
 nothing asked of the network. Then a headless Chromium opens every page from
 disk: it renders, its formulas are typeset, its pictures load, it requests
-nothing off the machine, and the search page finds a word of a notebook."""
+nothing off the machine, and the search page finds a word of a notebook.
+Chapter 2's parameter table is a table, code cells have a copy button, cell
+tags fold or drop cells and admonitions are boxes."""
 
 import base64
 import io
@@ -16,6 +18,7 @@ from html.parser import HTMLParser
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
+import nbformat
 import numpy as np
 import pytest
 from browser import CHROMIUM, Browser
@@ -86,6 +89,32 @@ def _parse(path: Path) -> _Page:
     page = _Page()
     page.feed(path.read_text(encoding="utf-8"))
     return page
+
+
+class _Tables(HTMLParser):
+    """Collects a page's tables, each a list of rows of cell texts."""
+
+    def __init__(self):
+        super().__init__()
+        self.tables: list[list[list[str]]] = []
+        self._cell: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        if tag == "table":
+            self.tables.append([])
+        elif tag == "tr" and self.tables:
+            self.tables[-1].append([])
+        elif tag in ("td", "th"):
+            self._cell = []
+
+    def handle_data(self, data):
+        if self._cell is not None:
+            self._cell.append(data)
+
+    def handle_endtag(self, tag):
+        if tag in ("td", "th") and self._cell is not None and self.tables and self.tables[-1]:
+            self.tables[-1][-1].append("".join(self._cell).strip())
+            self._cell = None
 
 
 def _local(page: Path, href: str) -> Path | None:
@@ -221,6 +250,19 @@ def test_the_search_index_holds_the_notebooks_words(book):
     assert "gtsam" in index["terms"], "the search index lacks a word of notebook 6"
 
 
+def test_chapter_2s_parameter_table_is_a_table(book):
+    """The table is a Markdown output of a cell: myst-nb's default (CommonMark) renders it as a paragraph of pipes."""
+    page = book.parent / "02_parameters.html"
+    parser = _Tables()
+    parser.feed(page.read_text(encoding="utf-8"))
+    tables = [rows for rows in parser.tables if rows and rows[0][:3] == ["stage", "parameter", "default"]]
+    assert len(tables) == 1, f"02_parameters has {len(tables)} parameter tables among {len(parser.tables)} tables"
+    rows = tables[0]
+    assert len(rows) > 30 and all(len(row) == len(rows[0]) == 5 for row in rows), "the parameter table's shape"
+    assert ["grid_step", "1.5"] in [row[1:3] for row in rows], "the table lacks grid_step's default"
+    assert "|---|" not in page.read_text(encoding="utf-8")
+
+
 # In a headless browser, from disk: one Chromium for all pages.
 
 
@@ -252,7 +294,7 @@ PAGE_STATE = """(() => {
     untypeset: [...document.querySelectorAll('.math.nohighlight')]  // Sphinx's; MathJax's own output has .math too
       .filter(e => !e.querySelector('.MathJax, .MathJax_Display')).map(e => e.textContent.slice(0, 60)),
     errors: document.querySelectorAll('.MathJax_Error, .merror').length,
-    raw: ['$$', '\\\\(', '\\\\['].filter(d => prose.textContent.includes(d)),
+    raw: ['$', '\\\\(', '\\\\['].filter(d => prose.textContent.includes(d)),  // '$': a $$ block myst did not read
     broken: [...document.images].filter(i => i.src && !(i.complete && i.naturalWidth > 0)).map(i => i.src),
     images: document.images.length,
   };
@@ -280,6 +322,55 @@ def test_every_page_renders_offline_with_its_formulas_typeset(book, browser):
 def test_the_pose_graph_formulas_are_typeset(book, browser):
     browser.open((book.parent / "06_pose_graph.html").resolve().as_uri())
     assert browser.evaluate(MATHJAX_DONE) >= 10, "MathJax typeset fewer than 10 formulas on 06_pose_graph"
+
+
+def test_a_display_formula_inside_a_list_item_is_typeset(book, browser):
+    """Chapter 3's relative pose error, a display formula in its own paragraph of a bullet."""
+    browser.open((book.parent / "03_registration.html").resolve().as_uri())
+    browser.evaluate(MATHJAX_DONE)
+    found = browser.evaluate("""[...document.querySelectorAll('article li')]
+      .filter(item => [...item.querySelectorAll('script[type^="math/tex"]')].some(s => s.text.includes('E_i =')))
+      .map(item => ({display: item.querySelectorAll('.MathJax_Display').length,
+                     dollars: item.innerText.includes('$')}))""")
+    assert found == [{"display": 1, "dollars": False}], f"the RPE formula in its bullet: {found}"
+
+
+def test_chapter_2s_parameter_table_fits_the_text_column_on_a_desktop(book, browser):
+    browser.resize(1300, 900)
+    browser.open((book.parent / "02_parameters.html").resolve().as_uri())
+    table, column = browser.evaluate("""(() => {
+      const table = document.querySelector('article table');
+      return [table.getBoundingClientRect().width, document.querySelector('article').getBoundingClientRect().width];
+    })()""")
+    assert table <= column, f"the parameter table is {table:.0f} px wide in a {column:.0f} px column"
+
+
+def test_code_cells_have_a_copy_button_from_the_books_own_script(book, browser):
+    page = book.parent / "03_registration.html"
+    loaded = [unquote(urlsplit(src).path) for src in _parse(page).resources]
+    scripts = [path for path in loaded if "clipboard" in path or "copybutton" in path]
+    assert {Path(s).name for s in scripts} >= {"clipboard.min.js", "copybutton.js", "copybutton.css"}, scripts
+    assert all((page.parent / s).is_file() for s in scripts), f"copy button files missing: {scripts}"
+    browser.resize(1300, 900)
+    browser.open(page.resolve().as_uri())
+    cells = browser.evaluate("""[...document.querySelectorAll('div.cell_input')].map(cell => {
+      const button = cell.querySelector('button.copybtn');
+      return button ? document.querySelector(button.dataset.clipboardTarget).innerText : null;
+    })""")
+    code = [cell.source for cell in nbformat.read(site_module.NOTEBOOKS / page.with_suffix(".ipynb").name, 4).cells
+            if cell.cell_type == "code"]  # fmt: skip
+    assert len(cells) == len(code) and None not in cells, f"{cells.count(None)} of {len(cells)} code cells lack one"
+    assert [text.strip() for text in cells] == [source.strip() for source in code], "a button copies other text"
+    x, y = browser.evaluate("""(() => {
+      const button = document.querySelector('div.cell_input button.copybtn');
+      button.scrollIntoView({block: 'center'});
+      const r = button.getBoundingClientRect();
+      return [r.left + r.width / 2, r.top + r.height / 2];
+    })()""")
+    browser.click(x, y)
+    copied = browser.evaluate("""new Promise(done => setTimeout(() =>
+      done(document.querySelector('div.cell_input button.copybtn').dataset.tooltip), 300))""")
+    assert copied == "Copied!", f"clicking the copy button says {copied!r}"
 
 
 def test_the_search_page_finds_a_word_of_a_notebook(book, browser):
@@ -426,3 +517,46 @@ def test_the_notebooks_run_in_a_kernel_that_draws_3d_views_as_pictures(tmp_path,
     assert main(["site", "--out", str(out)]) == 0  # executed, as by make run
     assert "views: static" in (out / "02_run.html").read_text(encoding="utf-8")
     assert not nbformat.read(one_notebook / "02_run.ipynb", as_version=4).cells[0].outputs  # the checkout's copy
+
+
+# Jupyter Book's cell tags and admonitions, on a page made for them: the tags fold a cell away (a <details> the
+# reader opens, no script needed) or drop it, and a note or tip shows as a box.
+TAGGED = {"hide-input": "shown output", "hide-cell": "output of a folded cell", "remove-cell": "output never shown"}
+
+
+@pytest.fixture()
+def tagged_page(tmp_path, one_notebook) -> Path:
+    import nbformat.v4
+
+    cells = [nbformat.v4.new_markdown_cell("# Tags\n\n```{note}\nA note.\n```\n\n:::{tip}\nA tip.\n:::")]
+    for tag, printed in TAGGED.items():
+        source = f"print({printed.upper()!r}.lower())  # {tag}"  # what it prints is not in its source
+        cell = nbformat.v4.new_code_cell(source, metadata={"tags": [tag]})
+        cell.outputs = [nbformat.v4.new_output("stream", name="stdout", text=printed + "\n")]
+        cells.append(cell)
+    notebook = nbformat.v4.new_notebook(cells=cells, metadata={"language_info": {"name": "python"}})
+    nbformat.write(notebook, one_notebook / "02_tags.ipynb")
+    assert _site(tmp_path / "html")[0] == 0
+    return tmp_path / "html" / "02_tags.html"
+
+
+def test_cell_tags_fold_or_drop_cells_and_admonitions_are_boxes(tagged_page):
+    html = tagged_page.read_text(encoding="utf-8")
+    assert "remove-cell" not in html and TAGGED["remove-cell"] not in html
+    folded = re.findall(r"<details.*?</details>", html, re.DOTALL)
+    assert len(folded) == 2, f"{len(folded)} folded parts"
+    assert "# hide-input" in folded[0] and TAGGED["hide-input"] not in folded[0] and TAGGED["hide-input"] in html
+    assert "# hide-cell" in folded[1] and TAGGED["hide-cell"] in folded[1]
+    assert 'class="admonition note"' in html and 'class="admonition tip"' in html
+
+
+def test_a_folded_cell_opens_in_the_browser(tagged_page, browser):
+    browser.open(tagged_page.resolve().as_uri())
+    shown = """[...document.querySelectorAll('div.cell')].map(cell =>
+      [cell.querySelector('.cell_input').checkVisibility(), cell.querySelector('.cell_output').checkVisibility()])"""
+    assert browser.evaluate(shown) == [[False, True], [False, False]]
+    for summary in range(2):
+        browser.evaluate(f"document.querySelectorAll('details summary')[{summary}].click()")
+    assert browser.evaluate(shown) == [[True, True], [True, True]]
+    leaving = [url for url in browser.requested() if not url.startswith(("file:", "data:", "about:"))]
+    assert not leaving, f"the page asked the network for {leaving}"

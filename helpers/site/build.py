@@ -3,8 +3,10 @@ Sphinx with myst-nb and sphinx-book-theme, the tooling Jupyter Book is made
 of. A landing page shows the result and says what each page teaches; every
 page has the whole book in its sidebar, previous/next links and a search box.
 MathJax 2.7 (from ``jupyter-server-mathjax``) is copied beside the pages and
-the theme's fonts and icons are its own files, so the book opens from disk
-with no server and no network.
+the theme's fonts and icons and the code cells' copy button
+(sphinx-copybutton) are its own files, so the book opens from disk with no
+server and no network. Cell tags (``hide-input``, ``hide-cell``,
+``remove-cell``) and admonitions (```` ```{note} ```` or ``:::{tip}``) work.
 
 The Sphinx source tree (a generated ``conf.py`` and ``index.md``, copies of
 the notebooks) lives in a temporary folder, so building leaves the checkout
@@ -60,17 +62,27 @@ FATAL_WARNINGS = re.compile(
 
 ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
 
+# The book's own style: a table a cell prints (chapter 2's parameters) fits the text column in a smaller type,
+# its long names (code) breaking where they must, instead of running off to the right.
+STYLE_SHEET = "book.css"
+STYLE = """.cell_output table { font-size: 0.8rem; }
+.cell_output table th, .cell_output table td { padding: 0.3rem 0.4rem; }
+.cell_output table code, .cell_output table code span { overflow-wrap: anywhere; white-space: normal; }
+"""
+
 # The generated conf.py: everything Sphinx is told.
 CONF = {
     "project": TITLE,
     "author": "the aerial-lidar-slam authors",
-    "extensions": ["myst_nb"],
+    "extensions": ["myst_nb", "sphinx_copybutton"],  # the copy button's script and style sheet go to _static
     "exclude_patterns": ["_build", "**.ipynb_checkpoints"],
-    "myst_enable_extensions": ["dollarmath", "amsmath"],
+    "myst_enable_extensions": ["dollarmath", "amsmath", "colon_fence"],  # $...$, $$...$$, ::: admonitions
+    "nb_render_markdown_format": "gfm",  # Markdown outputs (chapter 2's parameter table): commonmark has no tables
     "myst_heading_anchors": 3,  # [text](#a-heading) links within a notebook
     "myst_update_mathjax": False,  # it writes a MathJax 3/4 configuration; ours is MathJax 2 (below)
     "nb_execution_mode": "off",  # build_site executes the notebooks itself, in the kernel environment
     "nb_merge_streams": True,
+    "copybutton_selector": "div.cell_input div.highlight pre",  # on the code cells, not on what they print
     "nb_ipywidgets_js": {},  # no widget in our outputs; its default loads require.js from a CDN
     "mathjax_path": MATHJAX_URL,  # under _static
     "mathjax2_config": {
@@ -92,7 +104,8 @@ CONF = {
     },
     "html_theme": "sphinx_book_theme",
     "html_title": TITLE,
-    "html_static_path": [],
+    "html_static_path": ["_static"],  # the book's style sheet, STYLE below
+    "html_css_files": [STYLE_SHEET],
     "html_show_sphinx": False,
     "html_theme_options": {
         "home_page_in_toc": True,
@@ -140,6 +153,8 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         picture = (source / RESULT_PICTURE).is_file()
         (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
+        (source / "_static").mkdir()
+        (source / "_static" / STYLE_SHEET).write_text(STYLE, encoding="utf-8")
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
         built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
