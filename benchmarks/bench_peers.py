@@ -14,18 +14,36 @@ first true pose; the ATE is taken against the true poses of those scans.
 - small_gicp: GICP on 0.75 m voxels from a constant-velocity guess;
 - KISS-ICP (``pip install ".[bench]"``): its own pipeline, given the aerial ranges.
 
+Then KISS-Matcher (``pip install ".[bench]"``), a coarse registration peer
+rather than an odometry, on the same pairs of consecutive accepted scans: its
+default solver and its yaw-only one (``use_quatro=True``), each from the raw
+scans on ``--kiss-voxel`` m voxels (default 1.5 m, the reference's grid, as
+Open3D's recipe and our features use; its own default of 0.3 m is made for
+dense ground scans). Its noise bounds are gains times the voxel and it caps
+them at 1 m (so both are 1 m at 1.5 m voxels; it prints a warning when it
+does). Per row: CPU ms of its ``estimate`` per pair (median / 90th pct.; it
+runs TBB threads with no setting for their number, so the process is held to
+one core by CPU affinity for these rows and the times are single-core CPU
+time), its coarse error against the true relative pose (translation at the
+sensor: median, max, pairs off by more than 1 m of all), pairs it flagged invalid,
+the error after the package's ICP (the run's configuration) refines it, and
+the ATE of those refined motions chained.
+
 A peer that is not installed is reported as missing, not as a failure.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import numpy as np
 
 import helpers
 from helpers.config import Config
+from helpers.frames import prepare as prepare_frame
+from helpers.icp import refine_icp
 from helpers.metrics import ate
 from helpers.odometry import run_odometry
 
@@ -117,10 +135,100 @@ PEERS = {
 }
 
 
+KISS_MATCHER_ROWS = {"KISS-Matcher, defaults": False, "KISS-Matcher, yaw only (Quatro)": True}
+
+
+def kiss_matcher_pairs(scans, truth, matcher_config) -> dict:
+    """KISS-Matcher (a ``KISSMatcherConfig``) on each pair of consecutive
+    ``scans`` (the later onto the earlier), then the package's ICP from its answer; ``truth`` (N, 4, 4) the
+    scans' true poses. Returns per pair ``cpu_ms`` (its ``estimate``),
+    ``coarse`` and ``refined`` (translation error at the sensor, m) and
+    ``valid`` (its own flag), and ``poses``: the refined motions chained
+    from the first true pose. Call it with the process held to one core
+    (see :func:`one_core`) for single-core CPU times.
+    """
+    import kiss_matcher
+
+    matcher = kiss_matcher.KISSMatcher(matcher_config)
+    config = Config().with_values(registration=dict(mode="tracking"))  # prepare: the ICP cloud alone
+    fit = config.registration
+    out = {key: [] for key in ("cpu_ms", "coarse", "refined", "valid")}
+    poses, previous = [truth[0]], prepare_frame(scans[0], config)
+    for k in range(1, len(scans)):
+        current = prepare_frame(scans[k], config)
+        start = time.process_time()
+        solution = matcher.estimate(scans[k], scans[k - 1])  # source, target: target ~ R source + t
+        out["cpu_ms"].append(1000 * (time.process_time() - start))
+        coarse = np.eye(4)
+        coarse[:3, :3], coarse[:3, 3] = solution.rotation, solution.translation
+        refined, _ = refine_icp(
+            current.icp,
+            previous.icp,
+            coarse,
+            metric=fit.metric,
+            inlier_distance=fit.inlier_distance,
+            max_iterations=fit.icp_max_iterations,
+            tolerance=fit.icp_tolerance,
+            backend=fit.icp_backend,
+        )
+        true_motion = np.linalg.inv(truth[k - 1]) @ truth[k]
+        for key, estimate in (("coarse", coarse), ("refined", refined)):
+            out[key].append(float(np.linalg.norm((np.linalg.inv(true_motion) @ estimate)[:3, 3])))
+        out["valid"].append(bool(solution.valid))
+        poses.append(poses[-1] @ refined)
+        previous = current
+    return {**{key: np.array(value) for key, value in out.items()}, "poses": np.array(poses)}
+
+
+class one_core:
+    """Hold this process (and the threads it starts meanwhile) to one of its cores, then give the others back."""
+
+    def __enter__(self):
+        self.cores = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {min(self.cores)})
+
+    def __exit__(self, *exc):
+        os.sched_setaffinity(0, self.cores)
+
+
+def kiss_matcher_rows(scans, truth, voxel: float) -> None:
+    """Print KISS-Matcher's two rows (or that it is missing)."""
+    print(f"\nKISS-Matcher on the same {len(scans) - 1} pairs, {voxel} m voxels, one core:", flush=True)
+    try:
+        import kiss_matcher
+    except ImportError:
+        for name in KISS_MATCHER_ROWS:
+            print(f"{name:<34} not installed: pip install '.[bench]'")
+        return
+    configs = {
+        name: kiss_matcher.KISSMatcherConfig(voxel_size=voxel, use_quatro=q) for name, q in KISS_MATCHER_ROWS.items()
+    }
+    bounds = next(iter(configs.values()))
+    print(f"its noise bounds: matching {bounds.robin_noise_bound:.2f} m, solver {bounds.solver_noise_bound:.2f} m")
+    print(
+        f"{'system':<34} {'CPU ms/pair med/p90':>19} {'coarse m med/max':>17} {'>1 m':>7} {'invalid':>7}"
+        f" {'after ICP m med/max':>19} {'ATE m':>6}"
+    )
+    for name, matcher_config in configs.items():
+        with one_core():
+            r = kiss_matcher_pairs(scans, truth, matcher_config)
+        off = f"{(r['coarse'] > 1).sum()}/{len(r['coarse'])}"  # pairs off by more than 1 m
+        print(
+            f"{name:<34} {np.median(r['cpu_ms']):10.1f} / {np.percentile(r['cpu_ms'], 90):6.1f}"
+            f" {np.median(r['coarse']):8.2f} / {r['coarse'].max():6.2f} {off:>7}"
+            f" {(~r['valid']).sum():7d} {np.median(r['refined']):10.2f} / {r['refined'].max():6.2f}"
+            f" {ate(r['poses'], truth).rmse:6.2f}",
+            flush=True,
+        )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scans", type=int, default=None, help="accepted scans to register (default: all)")
+    parser.add_argument("--kiss-voxel", type=float, default=VOXEL, help="KISS-Matcher's voxel, m (default 1.5)")
     args = parser.parse_args()
+    if (args.scans is not None and args.scans < 2) or not 0 < args.kiss_voxel <= 20:
+        parser.exit(2, "error: --scans must be at least 2 and --kiss-voxel between 0 and 20 m\n")
     data = helpers.create_dataset()
     indices = np.arange(0, len(data), Config().registration.skip_frames)[: args.scans]
     scans, truth = [data.scans[i] for i in indices], data.poses[indices]
@@ -142,6 +250,7 @@ def main() -> None:
     print(f"{'system':<30} {'ms/scan':>8} {'x ours':>7} {'ATE m':>7}")
     for name, ms, error in rows:
         print(f"{name:<30} {ms:8.1f} {ms / reference:7.2f} {error:7.2f}")
+    kiss_matcher_rows(scans, truth, args.kiss_voxel)
 
 
 if __name__ == "__main__":
