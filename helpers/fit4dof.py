@@ -23,8 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SlamError
-from .geometry import check_points
-from .registration import LO_MAX_ROUNDS, LO_PER_CHUNK, MIN_INLIERS
+from .registration import LO_MAX_ROUNDS, LO_PER_CHUNK, MIN_INLIERS, check_fit_inputs
 
 SAMPLE_SIZE = 2  # matches that fix a yaw and a translation
 HYPOTHESES_PER_CHUNK = 64  # hypotheses scored at once; also how often the trial count is revised
@@ -67,16 +66,9 @@ def fit_yaw_translation(
     ``max_trials``. A SlamError says why when every sample was degenerate or
     the best model explains fewer than ``MIN_INLIERS`` matches.
     """
-    moving = check_points(moving_pts, "the matched moving points")
-    fixed = check_points(fixed_pts, "the matched fixed points")
-    if len(moving) != len(fixed):
-        raise SlamError(f"matched point lists differ in length: {len(moving)} moving and {len(fixed)} fixed")
-    if len(moving) < SAMPLE_SIZE:
-        raise SlamError(f"a yaw and translation fit needs at least {SAMPLE_SIZE} matches, got {len(moving)}")
-    if not (np.isfinite(max_distance) and max_distance > 0) or max_trials < 1:
-        raise SlamError(f"max_distance must be positive and max_trials at least 1, got {max_distance}, {max_trials}")
-    if not 0 < confidence < 1:
-        raise SlamError(f"the robust fit's confidence must lie strictly between 0 and 1, got {confidence!r}")
+    moving, fixed = check_fit_inputs(
+        moving_pts, fixed_pts, SAMPLE_SIZE, "a yaw and translation fit", max_distance, max_trials, confidence
+    )
 
     # Work about the centroids, as the six-degree-of-freedom fit does.
     moving_centre, fixed_centre = moving.mean(axis=0), fixed.mean(axis=0)

@@ -70,16 +70,9 @@ def estimate_rigid_msac(
     Returns ``(T, inliers)``: the 4 x 4 transform and a (K,) boolean mask.
     The same input and seed give the same result on any number of threads.
     """
-    moving = check_points(moving_pts, "the matched moving points")
-    fixed = check_points(fixed_pts, "the matched fixed points")
-    if len(moving) != len(fixed):
-        raise SlamError(f"matched point lists differ in length: {len(moving)} moving and {len(fixed)} fixed")
-    if len(moving) < SAMPLE_SIZE:
-        raise SlamError(f"a rigid fit needs at least {SAMPLE_SIZE} matches, got {len(moving)}")
-    if not (np.isfinite(max_distance) and max_distance > 0) or max_trials < 1:
-        raise SlamError(f"max_distance must be positive and max_trials at least 1, got {max_distance}, {max_trials}")
-    if not 0 < confidence < 1:
-        raise SlamError(f"the robust fit's confidence must lie strictly between 0 and 1, got {confidence!r}")
+    moving, fixed = check_fit_inputs(
+        moving_pts, fixed_pts, SAMPLE_SIZE, "a rigid fit", max_distance, max_trials, confidence
+    )
 
     # Work about the centroids: smaller numbers, better rounding in the cost expansion.
     moving_centre, fixed_centre = moving.mean(axis=0), fixed.mean(axis=0)
@@ -244,3 +237,19 @@ def _squared_residuals(transforms: np.ndarray, moving: np.ndarray, fixed: np.nda
     moved -= fixed.T
     moved *= moved
     return moved.sum(axis=1)
+
+
+def check_fit_inputs(moving_pts, fixed_pts, sample_size: int, fit: str, max_distance, max_trials, confidence):
+    """The matched points of a robust fit as two (K, 3) arrays, or a
+    SlamError saying what is wrong with them or with the fit's settings."""
+    moving = check_points(moving_pts, "the matched moving points")
+    fixed = check_points(fixed_pts, "the matched fixed points")
+    if len(moving) != len(fixed):
+        raise SlamError(f"matched point lists differ in length: {len(moving)} moving and {len(fixed)} fixed")
+    if len(moving) < sample_size:
+        raise SlamError(f"{fit} needs at least {sample_size} matches, got {len(moving)}")
+    if not (np.isfinite(max_distance) and max_distance > 0) or max_trials < 1:
+        raise SlamError(f"max_distance must be positive and max_trials at least 1, got {max_distance}, {max_trials}")
+    if not 0 < confidence < 1:
+        raise SlamError(f"the robust fit's confidence must lie strictly between 0 and 1, got {confidence!r}")
+    return moving, fixed
