@@ -25,10 +25,10 @@ MAT_KINDS = {"U": "text", "S": "text", "O": "a cell array or sparse matrix", "V"
 MAT_CLASS_CODES = {1: "cell", 2: "struct", 3: "object", 4: "char", 5: "sparse", 6: "double", 7: "single", 8: "int8"}
 MAT_CLASS_CODES |= {9: "uint8", 10: "int16", 11: "uint16", 12: "int32", 13: "uint32", 14: "int64", 15: "uint64"}
 MAT_CLASS_CODES |= {16: "function_handle", 17: "opaque"}
-MAT_NUMERIC = {"double", "single", "logical", *(f"{s}int{b}" for s in ("", "u") for b in (8, 16, 32, 64))}
+MAT_NUMERIC = {"double", "single", *(f"{s}int{b}" for s in ("", "u") for b in (8, 16, 32, 64))}
 MAT_CLASSES = {"char": "text", "cell": "a cell array or sparse matrix", "sparse": "a cell array or sparse matrix"}
 MAT_CLASSES |= {"struct": "a struct", "object": "a MATLAB object", "function_handle": "a function handle"}
-MAT_CLASSES |= {"complex": "complex numbers"}
+MAT_CLASSES |= {"complex": "complex numbers", "logical": "true/false values (a logical array), not coordinates"}
 MI_MATRIX, MI_COMPRESSED = 14, 15  # MAT-file v5 data types: a matrix, a zlib-compressed element
 # A CSV line of three numbers of full double precision ("-1234567.123456789012,...") takes under 100 bytes:
 # a larger file holds more waypoints than a flight may have, and is refused before it is read into memory.

@@ -258,6 +258,7 @@ MAT_CASES = [
     ("sparse", scipy.sparse.csr_matrix(np.ones((3, 2))), "it holds a cell array or sparse matrix"),
     ("struct", {"x": 1.0, "y": 2.0}, "it holds a struct"),
     ("complex", np.ones((3, 2)) * 1j, "it holds complex numbers"),
+    ("logical", np.array([[True, False], [False, True]]), "it holds true/false values"),
     ("empty", np.zeros((0, 2)), "holds no waypoints"),
     ("3-D", np.zeros((2, 2, 2)), "N x 2 or N x 3"),
     ("4 columns", np.zeros((3, 4)), "N x 2 or N x 3"),
@@ -283,7 +284,7 @@ def test_a_damaged_mat_file_is_refused(tmp_path, content):
 
 
 @pytest.mark.parametrize(
-    "value", [np.array([[1.0, 2.0]]), np.array([[1, 2], [3, 4]], np.int16), np.array([[True, False]])]
+    "value", [np.array([[1.0, 2.0]]), np.array([[1, 2], [3, 4]], np.int16), np.array([[7, 9]], np.uint8)]
 )
 def test_valid_mat_waypoints_load(tmp_path, value):
     path = tmp_path / "flight.mat"
