@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SlamError
-from .registration import LO_MAX_ROUNDS, LO_PER_CHUNK, MIN_INLIERS, check_fit_inputs
+from .registration import LO_PER_CHUNK, MIN_INLIERS, check_fit_inputs, locally_optimised
 
 SAMPLE_SIZE = 2  # matches that fix a yaw and a translation
 HYPOTHESES_PER_CHUNK = 64  # hypotheses scored at once; also how often the trial count is revised
@@ -89,7 +89,7 @@ def fit_yaw_translation(
             if not cost[winner] < best_raw_cost:
                 break
             model = (yaw[start + winner], offset[start + winner])
-            model, model_cost, inliers = _locally_optimised(model, moving_c, fixed_c, pair_terms, max_distance)
+            model, model_cost, inliers = _locally_optimised(model, moving_c, fixed_c, max_distance)
             if model_cost < best_cost:
                 best, best_cost, best_inliers = model, model_cost, inliers
                 needed = trials_needed(best_inliers.mean(), confidence, max_trials, SAMPLE_SIZE)
@@ -180,26 +180,17 @@ def _squared_residuals(model, moving: np.ndarray, fixed: np.ndarray) -> np.ndarr
     return ((moving @ T[:3, :3].T + T[:3, 3] - fixed) ** 2).sum(axis=1)
 
 
-def _locally_optimised(model, moving, fixed, pair_terms, max_distance):
+def _locally_optimised(model, moving, fixed, max_distance):
     """Refit ``model`` (yaw, offset) by least squares on its inliers until the
-    inlier set is stable; a refit is kept only while it lowers the MSAC cost.
+    inlier set is stable (:func:`helpers.registration.locally_optimised`).
     Returns ``(model, cost, inliers)``."""
-    limit = max_distance**2
-    squared = _squared_residuals(model, moving, fixed)
-    cost, inliers = np.minimum(squared, limit).sum(), squared < limit
-    for _ in range(LO_MAX_ROUNDS):
-        if inliers.sum() < SAMPLE_SIZE:
-            break
-        refit = fit_yaw(moving[inliers], fixed[inliers])
-        squared = _squared_residuals(refit, moving, fixed)
-        refit_cost, refit_inliers = np.minimum(squared, limit).sum(), squared < limit
-        if not refit_cost < cost:
-            break
-        converged = np.array_equal(refit_inliers, inliers)
-        model, cost, inliers = refit, refit_cost, refit_inliers
-        if converged:
-            break
-    return model, cost, inliers
+    return locally_optimised(
+        model,
+        lambda m: _squared_residuals(m, moving, fixed),
+        lambda inliers: fit_yaw(moving[inliers], fixed[inliers]),
+        max_distance,
+        SAMPLE_SIZE,
+    )
 
 
 def _distinct_pairs(rng: np.random.Generator, n: int, count: int) -> np.ndarray:

@@ -105,27 +105,39 @@ def estimate_rigid_msac(
 
 
 def _locally_optimised(transform: np.ndarray, moving: np.ndarray, fixed: np.ndarray, max_distance: float):
-    """Refit ``transform`` on its inliers until the inlier set is stable.
+    """Refit ``transform`` by Kabsch on its inliers until the inlier set is
+    stable (:func:`locally_optimised`). Returns ``(T, cost, inliers)``."""
+    return locally_optimised(
+        transform,
+        lambda T: _squared_residuals(T[None], moving, fixed)[0],
+        lambda inliers: kabsch(moving[inliers], fixed[inliers]),
+        max_distance,
+        SAMPLE_SIZE,
+    )
 
-    Returns ``(T, cost, inliers)``; a refit is kept only while it lowers the
-    MSAC cost, so the result is never worse than the hypothesis it started from.
-    """
+
+def locally_optimised(model, squared_residuals, refit, max_distance: float, sample_size: int):
+    """MSAC's local optimisation: refit ``model`` on its inliers
+    (``refit(inlier_mask)``) until the inlier set is stable. A refit is kept
+    only while it lowers the MSAC cost, so the result is never worse than the
+    hypothesis it started from. ``squared_residuals(model)`` gives every
+    match's squared distance. Returns ``(model, cost, inliers)``."""
     limit = max_distance**2
-    squared = _squared_residuals(transform[None], moving, fixed)[0]
+    squared = squared_residuals(model)
     cost, inliers = np.minimum(squared, limit).sum(), squared < limit
     for _ in range(LO_MAX_ROUNDS):
-        if inliers.sum() < SAMPLE_SIZE:
+        if inliers.sum() < sample_size:
             break
-        refit = kabsch(moving[inliers], fixed[inliers])
-        squared = _squared_residuals(refit[None], moving, fixed)[0]
-        refit_cost, refit_inliers = np.minimum(squared, limit).sum(), squared < limit
-        if not refit_cost < cost:
+        candidate = refit(inliers)
+        squared = squared_residuals(candidate)
+        candidate_cost, candidate_inliers = np.minimum(squared, limit).sum(), squared < limit
+        if not candidate_cost < cost:
             break
-        converged = np.array_equal(refit_inliers, inliers)
-        transform, cost, inliers = refit, refit_cost, refit_inliers
+        converged = np.array_equal(candidate_inliers, inliers)
+        model, cost, inliers = candidate, candidate_cost, candidate_inliers
         if converged:
             break
-    return transform, cost, inliers
+    return model, cost, inliers
 
 
 def _trials_needed(inlier_ratio: float, confidence: float, max_trials: int) -> int:
