@@ -40,10 +40,11 @@ from helpers import create_dataset
 from helpers.config import Config, SensorConfig
 from helpers.errors import SlamError
 from helpers.features import match_features
-from helpers.fit4dof import fit_yaw, fit_yaw_translation, trials_needed, yaw_transform
+from helpers.fit4dof import fit_yaw, fit_yaw_translation, yaw_transform
 from helpers.fitting import fit_to_flight, flight_of
 from helpers.icp import refine_icp
 from helpers.odometry import describe, prepare
+from helpers.registration import trials_needed
 
 AUTZEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "autzen_trim.laz"
 LOW_HEIGHTS = {"low": 150.0, "autzen150": 150.0, "autzen250": 250.0}  # m above the ground

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import SlamError
-from .registration import LO_PER_CHUNK, MIN_INLIERS, check_fit_inputs, locally_optimised
+from .registration import LO_PER_CHUNK, MIN_INLIERS, check_fit_inputs, locally_optimised, trials_needed
 
 SAMPLE_SIZE = 2  # matches that fix a yaw and a translation
 HYPOTHESES_PER_CHUNK = 64  # hypotheses scored at once; also how often the trial count is revised
@@ -135,17 +135,6 @@ def yaw_transform(yaw: float, offset) -> np.ndarray:
     out[:2, :2] = [[c, -s], [s, c]]
     out[:3, 3] = offset
     return out
-
-
-def trials_needed(inlier_ratio: float, confidence: float, max_trials: int, sample_size: int = SAMPLE_SIZE) -> int:
-    """Samples of ``sample_size`` needed to draw one all-inlier sample with
-    ``confidence`` (the standard RANSAC count), at most ``max_trials``."""
-    all_inliers = inlier_ratio**sample_size
-    if all_inliers >= 1.0:
-        return 1
-    if all_inliers <= 0.0:
-        return max_trials
-    return int(min(max_trials, np.ceil(np.log(1.0 - confidence) / np.log1p(-all_inliers))))
 
 
 def msac_costs(yaw: np.ndarray, offset: np.ndarray, pair_terms: np.ndarray, max_distance: float) -> np.ndarray:

@@ -92,7 +92,7 @@ def estimate_rigid_msac(
             model, model_cost, inliers = _locally_optimised(hypotheses[winner], moving_c, fixed_c, max_distance)
             if model_cost < best_cost:
                 best, best_cost, best_inliers = model, model_cost, inliers
-                needed = _trials_needed(best_inliers.mean(), confidence, int(max_trials))
+                needed = trials_needed(best_inliers.mean(), confidence, int(max_trials))
         best_raw_cost = min(best_raw_cost, cost.min())
     if best is None:
         raise SlamError(f"all {max_trials} samples of 3 matches were degenerate (collinear points)")
@@ -140,9 +140,10 @@ def locally_optimised(model, squared_residuals, refit, max_distance: float, samp
     return model, cost, inliers
 
 
-def _trials_needed(inlier_ratio: float, confidence: float, max_trials: int) -> int:
-    """Samples of 3 needed to draw one all-inlier sample with ``confidence``, at most ``max_trials``."""
-    all_inliers = inlier_ratio**SAMPLE_SIZE
+def trials_needed(inlier_ratio: float, confidence: float, max_trials: int, sample_size: int = SAMPLE_SIZE) -> int:
+    """Samples of ``sample_size`` matches needed to draw one all-inlier sample
+    with ``confidence`` (the standard RANSAC count), at most ``max_trials``."""
+    all_inliers = inlier_ratio**sample_size
     if all_inliers >= 1.0:
         return 1
     if all_inliers <= 0.0:

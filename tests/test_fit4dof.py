@@ -12,9 +12,9 @@ from helpers.fit4dof import (
     fit_yaw,
     fit_yaw_translation,
     msac_costs,
-    trials_needed,
     yaw_transform,
 )
+from helpers.registration import trials_needed
 
 EXTENT = np.array([50.0, 50.0, 10.0])  # half-extent of the synthetic matched points, m: a scan's strip of ground
 

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
 from helpers.icp import icp_cloud, icp_rmse, refine_icp
-from helpers.registration import _trials_needed, estimate_rigid_msac, kabsch
+from helpers.registration import estimate_rigid_msac, kabsch, trials_needed
 
 ICP = {"max_iterations": 30, "tolerance": 1e-6}  # a tight tolerance: these tests want ICP converged
 BACKENDS = ["small_gicp", "open3d"]
@@ -105,7 +105,7 @@ def test_msac_answer_is_the_least_squares_fit_of_its_inliers_whatever_the_seed()
 def test_trial_count_follows_the_inlier_ratio(inlier_ratio, confidence, expected):
     """log(1 - p) / log(1 - w^3), rounded up and capped at the 3000 trials allowed:
     w = 0.5 needs ceil(ln 0.01 / ln 0.875) = 35 samples for 99 %."""
-    assert _trials_needed(inlier_ratio, confidence, 3000) == expected
+    assert trials_needed(inlier_ratio, confidence, 3000) == expected
 
 
 def test_msac_with_many_inliers_stops_early_with_the_same_answer():
