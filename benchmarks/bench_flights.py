@@ -77,7 +77,7 @@ def build_flight(options: dict):
     if name == "default":
         field, xy, above = default_scene(), read_waypoints(DEFAULT_WAYPOINTS)[:, :2], None
     elif name.startswith("seed"):
-        seed, height = name.removeprefix("seed").split("-")
+        seed = name.removeprefix("seed").split("-")[0]
         field = default_scene(seed=int(seed))
         xy, above = _turned(read_waypoints(DEFAULT_WAYPOINTS)[:, :2], field), None
     elif name.startswith("sparse-"):
@@ -196,7 +196,7 @@ def main() -> None:
         problems = " | ".join(p[:60] for p in r["problems"])
         print(
             f"{name:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['rpe']:6.3f} {r['ratio']:6.4f} "
-            f"{r['loops']:5d} ({r['false']}) {mapped:>6} {str(r['trusted']):>7} {r['seconds']:6.0f} "
+            f"{r['loops']:5d} ({r['false']}) {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
             f"{r['peak_gib']:5.2f}  {problems}",
             flush=True,
         )
