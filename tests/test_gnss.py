@@ -193,18 +193,21 @@ def test_gnss_of_2_m_brings_a_low_flight_well_under_2_m(tmp_path):
 
 def test_gnss_of_2_m_costs_little_where_the_lidar_is_good(flight_over):
     """A 100-scan stretch of the default flight at its 700 m, where the lidar alone is good: its own GNSS
-    of 2 m sigma leaves the optimised ATE within 0.4 m of the lidar-only run's. With today's fixed edge
-    sigmas (0.3 degrees a step, far looser than the odometry's real error) the fixes can bend a loopless
-    stretch; the README gives the whole flight's figures."""
+    of 2 m sigma leaves the optimised ATE within 0.1 m of the lidar-only run's when the edges say how sure
+    they are (here fixed sigmas near the odometry's real error, 0.05 m and 0.03 degrees a step; measured
+    0.160 -> 0.188 m). With the default fixed sigmas (0.3 degrees a step, some twenty times the real
+    rotation error) the fixes bend this loopless stretch instead (0.159 -> 0.723 m): the calibrated
+    information of issue 21 item 2 is what GNSS needs."""
+    from helpers.config import Config
     from helpers.gnss import GnssFixes
     from helpers.metrics import ate
     from helpers.pipeline import run_slam
 
     data = flight_over(slice(0, 100))
-    lidar = run_slam(data)
-    fixes = simulate_gnss(data.poses[:, :3, 3], 2.0, 2.0, seed=0)
-    both = run_slam(data, odometry=lidar.odometry, gnss=GnssFixes(np.arange(len(data)), fixes, np.full(3, 2.0)))
+    config = Config().with_values(pose_graph={"edge_sigma_m": 0.05, "edge_sigma_deg": 0.03})
+    lidar = run_slam(data, config)
+    fixes = GnssFixes(np.arange(len(data)), simulate_gnss(data.poses[:, :3, 3], 2.0, 2.0, seed=0), np.full(3, 2.0))
+    both = run_slam(data, config, odometry=lidar.odometry, gnss=fixes)
     truth = data.poses[lidar.indices]
     alone, fixed = ate(lidar.poses_optimized, truth).rmse, ate(both.poses_optimized, truth).rmse
-    assert fixed <= alone + 0.4, (alone, fixed)
-    assert fixed < 1.0
+    assert fixed <= alone + 0.1, (alone, fixed)
