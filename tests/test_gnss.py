@@ -102,6 +102,10 @@ def test_sigmas_and_flight_checks():
         fixes.check_flight(9)
     # nodes are accepted scans 0, 3, 6, 9: scans 0, 3 and 9 have fixes, on nodes 0, 1 and 3
     assert [f.node for f in fixes.factors([0, 3, 6, 9])] == [0, 1, 3]
+    with pytest.raises(SlamError, match="sigmas must be 3 positive"):
+        GnssFixes(np.array([0]), np.zeros((1, 3)), np.array([1.0, 1.0, 0.0]))
+    with pytest.raises(SlamError, match="positions must be 1 x 3 finite"):
+        GnssFixes(np.array([0]), np.full((1, 3), np.nan), np.ones(3))
 
 
 @pytest.mark.parametrize("seed", range(3))
