@@ -35,12 +35,15 @@ import numpy as np
 
 from .errors import SlamError
 from .limits import (
+    MAX_ACCELERATION,
+    MAX_ANGULAR_ACCELERATION,
     MAX_EDGES_BACK,
     MAX_ITERATIONS,
     MAX_LENGTH,
     MAX_NEIGHBORS,
     MAX_RADIUS,
     MAX_SCANS,
+    MAX_SPEED,
     MAX_TRIALS,
     MIN_GRID,
     MIN_RMSE,
@@ -231,6 +234,18 @@ class PoseGraphConfig(BoundedTable):
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
     loop_kernel: str = param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
+    motion_factor: bool = param(
+        False, "a soft constant-velocity factor over every three consecutive nodes (false: the reference)"
+    )
+    motion_speed: float = param(
+        10.0, "motion factor: the drone's nominal ground speed, m/s (turns the step between nodes into a time)"
+    )
+    motion_acceleration: float = param(
+        1.0, "motion factor: the acceleration the drone may have, m/s^2 (its translation sigma: a dt^2)"
+    )
+    motion_angular_acceleration: float = param(
+        20.0, "motion factor: the change of turn rate the drone may have, deg/s^2 (its rotation sigma)"
+    )
 
     def __post_init__(self):
         self._within("edges_back", 1, MAX_EDGES_BACK)
@@ -240,6 +255,12 @@ class PoseGraphConfig(BoundedTable):
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
         self._one_of("loop_kernel", LOOP_KERNELS)
+        self._check("motion_factor", lambda v: isinstance(v, bool), "true or false")
+        self._between("motion_speed", MIN_SIGMA, MAX_SPEED, "a positive number of metres per second")
+        self._between("motion_acceleration", MIN_SIGMA, MAX_ACCELERATION, "a positive number of m/s^2")
+        self._between(
+            "motion_angular_acceleration", MIN_SIGMA, MAX_ANGULAR_ACCELERATION, "a positive number of deg/s^2"
+        )
 
     @property
     def edge_sigmas(self) -> np.ndarray:
