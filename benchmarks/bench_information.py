@@ -9,7 +9,8 @@ floor). For every edge (odometry steps, edges back, loops) its error against
 the truth, ``xi = Log(inv(T_true) @ T_est)`` (translation first, in the moving
 scan's frame, the information's convention), is whitened by its information
 after calibration (``[pose_graph] information_scale`` and the floor of
-``min_sigma_m`` / ``min_sigma_deg``). Calibrated, ``xi^T I xi`` follows a
+``min_sigma_m`` / ``min_sigma_deg``; an edge back's then divided by its span,
+as :func:`helpers.slam.build_pose_graph` weighs it). Calibrated, ``xi^T I xi`` follows a
 chi-square law with 6 degrees of freedom: per degree of freedom its median is
 0.89 and its mean 1, and the error along each principal direction of the
 covariance, in sigmas, has an RMS of 1. ``weak`` is that RMS along the
@@ -87,8 +88,8 @@ def measure(label: str, pairs: int) -> dict:
 def whiten(rows, scale: float, floor: np.ndarray):
     """Per edge: chi-square per degree of freedom, and the error in sigmas along each principal direction."""
     chi, along = [], []
-    for _, _, _, xi, raw in rows:
-        info = calibrated(raw, scale, floor)
+    for kind, i, j, xi, raw in rows:
+        info = calibrated(raw, scale, floor) / (j - i if kind == "back" else 1)  # as build_pose_graph weighs it
         chi.append(xi @ info @ xi / 6)
         values, vectors = np.linalg.eigh(np.linalg.inv(info)[:3, :3])
         full_values, full_vectors = np.linalg.eigh(np.linalg.inv(info))

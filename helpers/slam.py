@@ -247,8 +247,11 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     steps an edge spans: an edge to the scan ``k`` nodes back is measured on a
     smaller overlap and is less sure (notebook 6 measures how much). With
     ``"hessian"`` every edge carries its own calibrated information (each
-    registration's, :mod:`helpers.information`); an edge without one (an odometry
-    given without it, point-to-point ICP) falls back to the icp sigmas.
+    registration's, :mod:`helpers.information`), an edge back's divided by the
+    steps it spans: the Hessian sees the noise of the pairs, not the error of
+    a smaller overlap that grows with the span (``benchmarks/bench_information.py``
+    measures both). An edge without information (an odometry given without
+    it, point-to-point ICP) falls back to the icp sigmas.
     """
     weights = config.pose_graph.graph_weights
     fixed = weights != "identity"
@@ -268,7 +271,7 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
             graph.add_odometry(j - 1, j, step, sigmas)
     for edge in extra:
         if own and edge.information is not None:
-            graph.add_factor(BetweenFactor(edge.i, edge.j, edge.relative, edge.information))
+            graph.add_factor(BetweenFactor(edge.i, edge.j, edge.relative, edge.information / (edge.j - edge.i)))
         else:
             graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if fixed else 1))
     information = information_from_sigmas(sigmas)
