@@ -211,7 +211,7 @@ class PoseGraphConfig(BoundedTable):
     no robust kernel can tell it from a right one. The icp weights give every
     edge sigmas close to the real error of ICP between overlapping scans, for
     odometry and loops alike: then a residual "in sigmas" means something.
-    The hessian weights (ours, the default) give each edge its own: the
+    The hessian weights (ours, one value away) give each edge its own: the
     information of the registration that measured it, calibrated on flights
     whose truth is known (``benchmarks/bench_information.py``), so a step over
     flat ground says how little it knows along the track.
@@ -228,7 +228,7 @@ class PoseGraphConfig(BoundedTable):
         0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
     )
     graph_weights: str = param(
-        "hessian", "edge weights: hessian (each registration's own, calibrated), icp (the sigmas below), identity"
+        "icp", "edge weights: hessian (each registration's own, calibrated), icp (the sigmas below), identity"
     )
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
