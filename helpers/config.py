@@ -58,7 +58,7 @@ NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # sets the lidar noise seed of the e
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
 MODES = ("global", "tracking")
-GRAPH_WEIGHTS = ("icp", "identity")
+GRAPH_WEIGHTS = ("hessian", "icp", "identity")
 LOOP_KERNELS = ("none", "huber", "cauchy")
 
 
@@ -218,6 +218,10 @@ class PoseGraphConfig(BoundedTable):
     no robust kernel can tell it from a right one. The icp weights give every
     edge sigmas close to the real error of ICP between overlapping scans, for
     odometry and loops alike: then a residual "in sigmas" means something.
+    The hessian weights (ours, one value away) give each edge its own: the
+    information of the registration that measured it, calibrated on flights
+    whose truth is known (``benchmarks/bench_information.py``), so a step over
+    flat ground says how little it knows along the track.
     """
 
     TABLE: ClassVar[str] = "pose_graph"
@@ -230,9 +234,16 @@ class PoseGraphConfig(BoundedTable):
     edges_back_rmse_threshold: float = param(
         0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
     )
-    graph_weights: str = param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
+    graph_weights: str = param(
+        "icp", "edge weights: hessian (each registration's own, calibrated), icp (the sigmas below), identity"
+    )
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
+    information_scale: float = param(
+        0.35, "hessian weights: ICP's information (Hessian over residual variance) is multiplied by this"
+    )
+    min_sigma_m: float = param(0.001, "hessian weights: no edge is surer than this along any translation, metres")
+    min_sigma_deg: float = param(0.001, "hessian weights: ... nor than this about any axis, degrees")
     loop_kernel: str = param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
     motion_factor: bool = param(
         False, "a soft constant-velocity factor over every three consecutive nodes (false: the reference)"
@@ -254,6 +265,9 @@ class PoseGraphConfig(BoundedTable):
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
+        self._between("information_scale", MIN_SIGMA, 1.0, "a positive fraction (ICP is never surer than its Hessian)")
+        self._between("min_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
+        self._between("min_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
         self._one_of("loop_kernel", LOOP_KERNELS)
         self._check("motion_factor", lambda v: isinstance(v, bool), "true or false")
         self._between("motion_speed", MIN_SIGMA, MAX_SPEED, "a positive number of metres per second")
@@ -266,6 +280,11 @@ class PoseGraphConfig(BoundedTable):
     def edge_sigmas(self) -> np.ndarray:
         """(6,) translation-first sigmas of a one-step edge with icp weights: metres, then radians."""
         return np.array([self.edge_sigma_m] * 3 + [math.radians(self.edge_sigma_deg)] * 3)
+
+    @property
+    def min_sigmas(self) -> np.ndarray:
+        """(6,) translation-first floor of an edge's sigmas with hessian weights: metres, then radians."""
+        return np.array([self.min_sigma_m] * 3 + [math.radians(self.min_sigma_deg)] * 3)
 
 
 @dataclass(frozen=True)
