@@ -132,7 +132,11 @@ class RegistrationConfig(BoundedTable):
         1.0, "tracking: a step that ends this far (m) from the last motion is registered globally"
     )
     tracking_max_jump_deg: float = param(6.0, "tracking: ... or turns this much (deg) more or less than it")
-    tracking_min_overlap: float = param(0.8, "tracking: ... or pairs a smaller share of its points than this")
+    tracking_min_overlap: float = param(
+        0.8,
+        "a registration pairing a smaller share of its points is doubted "
+        "(tracking: registered globally; global: ICP from the last motion too)",
+    )
 
     def __post_init__(self):
         self._check("skip_frames", lambda v: v >= 1, "an integer of at least 1")

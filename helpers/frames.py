@@ -184,9 +184,21 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
         else:
             fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
-    constraint = float("nan")
+    paired, constraint = float("nan"), float("nan")
     if moving.icp is not None and fixed.icp is not None:
-        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
+        paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
+    # 4. A fit that pairs little of the scan can still score a low RMSE over its few pairs (flat, sparse ground
+    # matches itself metres away): ICP from the previous motion too, and the one that pairs more is kept.
+    if paired < fit.tracking_min_overlap and not np.allclose(T_coarse, guess):
+        retry = _icp(moving, fixed, guess, fit, icp)
+        paired_retry, constraint_retry = pairing(moving.icp, fixed.icp, retry[0], fit.inlier_distance)
+        if paired_retry > paired:
+            fallback = (
+                f"ICP from the robust fit paired {paired:.0%} of the points; restarted from the previous motion, "
+                f"which paired {paired_retry:.0%}"
+            )
+            refined, T_coarse, constraint = retry, guess, constraint_retry
+            T_fine, rmse = retry
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,

@@ -125,3 +125,29 @@ def test_tracking_hands_doubtful_steps_to_the_global_workflow(flight):
     reference = run_odometry(flight.scans[:30], flight.poses[0], Config())
     assert not doubtful.tracked.any()
     np.testing.assert_allclose(doubtful.relative, reference.relative, atol=1e-9)
+
+
+def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(flight, monkeypatch):
+    """A robust fit tens of metres off can leave ICP with a low RMSE over the
+    few points it still pairs (flat ground matches itself anywhere): the
+    registration must see how little it paired, restart from the last motion
+    and keep the answer that pairs more, near the truth."""
+    import helpers.frames as frames
+
+    config = Config()
+    fixed_id, moving_id = 30, 33
+    truth = np.linalg.inv(flight.poses[fixed_id]) @ flight.poses[moving_id]
+    far = truth.copy()
+    far[:3, 3] += [40.0, 0.0, 0.0]  # most of the way along the 53 m strip: ICP settles over 100 m off, pairing few points
+    monkeypatch.setattr(frames, "estimate_rigid_msac", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    fixed, moving = (frames.describe(prepare(flight.scans[k], config), config) for k in (fixed_id, moving_id))
+    pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
+    assert "paired" in (pair.fallback or ""), pair.fallback
+    assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.3
+
+
+def _nudge(metres: float) -> np.ndarray:
+    """A last motion half a metre off the truth, as a previous step's would be."""
+    nudge = np.eye(4)
+    nudge[:3, 3] = [metres, 0.0, 0.0]
+    return nudge
