@@ -29,6 +29,7 @@ MAX_LENGTH = 1_000.0  # m: grid steps and distances; a kilometre spans a whole s
 MAX_RADIUS = 10_000.0  # m: a search radius beyond any tile a height field can hold (helpers.mapio.MAX_MAP_CELLS)
 MAX_RANGE = 1_000_000.0  # m: lidar range; far beyond any lidar's and still finite in float32 rays
 MIN_RMSE = 0.001  # m: RMSE thresholds; a millimetre is below any lidar's noise
+MAX_SIGMAS = 100.0  # a gate in sigmas: beyond a few the Gaussian says nothing more; 100 already admits everything
 MIN_SIGMA = 1e-6  # edge sigmas: an information of 1e12 already; 1e-300 would make it infinite
 
 

@@ -153,7 +153,7 @@ class Slam:
         self.icp = IcpService.from_config(config.registration)
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given = odometry
-        self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
+        self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph)
         graph = config.pose_graph
         self.edges_back = EdgesBack(
             self.icp,
@@ -201,6 +201,7 @@ class Slam:
         # 3. Edges back, from the chained odometry.
         start = time.perf_counter()
         edges = self.edges_back.add(node, self.clouds, relative)
+        self.loops.add_edges(edges)  # the loop search's uncertainty graph
         self.runtime["edges_back"] += time.perf_counter() - start
         return Step(index, True, node, poses[node], fallback, query, tuple(edges))
 
