@@ -45,7 +45,7 @@ from .loopsearch import (
     search_radius,
 )
 from .submaps import SubmapIndex, centre_scan_id, scan_ids_of
-from .uncertainty import RelativeUncertainty
+from .uncertainty import RelativeUncertainty, mahalanobis_gate
 
 log = logging.getLogger(__name__)
 
@@ -151,14 +151,13 @@ class LoopCloser:
         loop edge if :meth:`accepts` it. None if no submap was registered."""
         submaps, settings = self.submaps, self.settings
         # 1. Old submaps within the search radius (grown, or from the graph's uncertainty), verified by ICP.
-        covariances = None
+        covariances, centres = None, submaps.centres
         self._follow(node, poses)
         if self.uncertainty is not None:
-            n, eligible = submaps.n_scans_per_submap, eligible_submaps(len(submaps), settings)
-            covariances = self.uncertainty.position_covariances([centre_scan_id(k, n) for k in range(eligible)])
+            covariances, centres = self._uncertain_centres(pose[:3, 3])
         candidates = find_loop_candidates(
             submaps.points,
-            submaps.centres,
+            centres,
             cloud,
             pose,
             len(submaps) - 1,
@@ -197,6 +196,23 @@ class LoopCloser:
             closure=closure,
             best_scan_constraint=pinned,
         )
+
+    def _uncertain_centres(self, position: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The covariance of each eligible submap's centre relative to the scan
+        at ``position`` (exact where the gate may let it in, carried over
+        elsewhere), and every submap's centre, the eligible ones where the
+        graph puts them (the odometry's, moved by the loop edges found)."""
+        settings, n = self.settings, self.submaps.n_scans_per_submap
+        nodes = [centre_scan_id(k, n) for k in range(eligible_submaps(len(self.submaps), settings))]
+        radius, sigmas = settings.loop_closure_search_radius, settings.search_sigmas
+
+        def wanted(covariances):
+            return mahalanobis_gate(self.uncertainty.positions(nodes), position, covariances, radius, sigmas)[0]
+
+        covariances = self.uncertainty.position_covariances(nodes, wanted=wanted)
+        centres = self.submaps.centres
+        centres[: len(nodes)] = self.uncertainty.positions(nodes)
+        return covariances, centres
 
     def accepts(self, rmse: float, constraint: float) -> bool:
         """A best scan match is a loop edge if it fits (surface RMSE below
