@@ -213,7 +213,7 @@ class RelativeUncertainty:
             moved = self.values.retract(self._tree.optimize())
         except RuntimeError as exc:  # an indeterminant system: some node joined by no edge
             raise SlamError(f"the loop search's graph cannot be solved: {exc}") from None
-        self._positions = np.array([moved.atPose3(k).translation() for k in range(anchor + 1)])
+        self._positions = gtsam.utilities.extractPose3(moved)[:, 9:12]  # rows [R (9), t (3)], node by node
         kept = np.array([c for c in self._cached if c < anchor], dtype=int)
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
@@ -227,13 +227,13 @@ def _rotation_first(information: np.ndarray) -> np.ndarray:
 
 
 def mahalanobis_gate(
-    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius: float, sigmas: float
+    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius, sigmas: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Which old places the scan at ``position`` may truly be over, and the
     search radius around each.
 
-    Place ``k`` (its centre, map frame) is in reach when the odometry's offset
-    to it, less the fixed ``radius`` (the place's extent), is within
+    Place ``k`` (its centre, map frame) is in reach when the offset to it,
+    less ``radius`` (the place's extent, m; one number or one per place), is within
     ``sigmas`` of its uncertainty: ``d' = d (1 - radius / |d|)`` and
     ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
     the direction ``u`` of the offset follows: ``radius + sigmas /
@@ -247,5 +247,5 @@ def mahalanobis_gate(
     floor = 1e-12 * np.eye(3)  # a node at the anchor has no uncertainty at all
     inverse = np.linalg.inv(covariances + floor)
     spread = 1.0 / np.sqrt(np.einsum("ki,kij,kj->k", direction, inverse, direction))
-    reach = radius + sigmas * spread
+    reach = np.asarray(radius, float) + sigmas * spread
     return distance < reach, reach
