@@ -90,7 +90,7 @@ class RelativeUncertainty:
         graph.add_edge(edge)  # an edge back; graph.add_edge(loop, loop=True) for a loop edge
         cov = graph.position_covariances(old_nodes)  # (K, 3, 3), map frame, m²
 
-    ``seconds`` and ``refreshes`` say what the answers cost.
+    ``seconds``, ``refreshes`` and ``answers`` say what the answers cost.
     """
 
     def __init__(self, settings: PoseGraphConfig, refresh_nodes: int = REFRESH_NODES) -> None:
@@ -98,7 +98,7 @@ class RelativeUncertainty:
         self.graph = gtsam.NonlinearFactorGraph()
         self.values = gtsam.Values()
         self.poses: list[np.ndarray] = []
-        self.seconds, self.refreshes = 0.0, 0
+        self.seconds, self.refreshes, self.answers = 0.0, 0, 0  # time spent, eliminations, queries answered
         self._anchor: int | None = None  # the node the cached marginals are relative to
         self._tree = None  # the graph held at the anchor, eliminated: its marginals and its solution
         self._positions = np.zeros((0, 3))  # where the graph held at the anchor puts each node (map frame)
@@ -169,6 +169,7 @@ class RelativeUncertainty:
         if redo:
             covariance[redo] = self._from_cache(nodes[redo])
         self.seconds += time.perf_counter() - start
+        self.answers += 1
         return covariance
 
     def positions(self, nodes) -> np.ndarray:
