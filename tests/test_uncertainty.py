@@ -237,7 +237,7 @@ def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
     from helpers.evaluation import grade_loops, run_metrics
     from helpers.pipeline import run_slam
 
-    config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty"})
+    config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty", "skip_after_loop": 0})
     result = run_slam(short_loop, config)
     m = run_metrics(short_loop, result)
     assert m["n_loop_closures"] >= 3 and m["n_false_loop_closures"] == 0
