@@ -190,7 +190,7 @@ class LoopClosureConfig(BoundedTable):
         3.0, "uncertainty search: an old submap is a candidate if within the radius this many sigmas away"
     )
     skip_after_loop: int = param(
-        6, "no query for this many accepted scans after a loop edge closed on the same place (0: the reference)"
+        3, "no query for this many accepted scans after a loop edge closed on the same place (0: the reference)"
     )
     max_attempts: int = param(3, "submaps registered at most per query, nearest first")
     max_returned: int = param(3, "matching submaps kept at most, best first")
