@@ -74,7 +74,8 @@ def main() -> None:
     parser.add_argument("--skip-after-loop", type=int, nargs="+", default=[None], help="default: the config's")
     args = parser.parse_args()
     if any(s is not None and s < 0 for s in args.skip_after_loop):
-        sys.exit("error: --skip-after-loop takes zero or a positive number of accepted scans")
+        print("error: --skip-after-loop takes zero or a positive number of accepted scans", file=sys.stderr)
+        sys.exit(2)
     lap = helpers.read_waypoints(helpers.DEFAULT_WAYPOINTS)[:LAP]
     header = ("laps", "search", "skip", "scans", "dataset s", "SLAM s", "ms/scan", "peak GiB", "loops", "ATE m")
     print(" ".join(f"{h:>11}" for h in header))
