@@ -1,32 +1,37 @@
 """Step-length bias per registration stage: how long the estimated step is against the true one.
 
     nice -n 10 .venv/bin/python benchmarks/bench_bias.py [--flights default-700 autzen-150 ...]
-        [--experiment stages|grid|surface|start|skip|metric|crop] [--pairs N]
+        [--experiment stages|before|grid|icpgrid|surface|start|skip|metric|crop|epsilon|steep|rows] [--pairs N]
 
 Each flight is a stretch of a loop; its parameters are fitted to it as ``run``
 fits them (:func:`helpers.fitting.fit_to_flight`). Consecutive accepted scans
-are registered as the odometry does and, for every pair, the estimated
-translation is compared with the true one in the fixed scan's true sensor
-frame (x along the track, y across, z up). The ratio ``along`` is the
-estimate's component along the true step over the true step length; ``norm``
-is the estimate's length over the true length. Stages: ``coarse`` (FPFH,
-matching and MSAC), ``icp`` (the refinement from the coarse fit) and
-``chain`` (ten consecutive ICP steps chained, against the true motion over
-those ten steps: rotation errors shorten or lengthen it too).
+are registered by the odometry's own code (:func:`helpers.odometry.register_frames`,
+with the overlap crop of :mod:`helpers.overlap` when the configuration has it,
+as it has by default) and, for every pair, the estimated translation is
+compared with the true one in the fixed scan's true sensor frame (x along the
+track, y across, z up). The ratio ``along`` is the estimate's component along
+the true step over the true step length; ``norm`` is the estimate's length
+over the true length. Stages: ``coarse`` (FPFH, matching and MSAC), ``icp``
+(the refinement from the coarse fit) and ``chain`` (ten consecutive ICP steps
+chained, against the true motion over those ten steps: rotation errors
+shorten or lengthen it too). ``sparse-150`` is the default scene resampled
+as a tile of Autzen's density and flown 150 m above its ground.
 
 The experiments test one hypothesis each on the same pairs (the brief of issue 21):
+``before`` the code before the overlap crop against the code as shipped;
+``crop`` ICP on the whole moving scan against the shipped crop;
 ``grid`` the grid average in each scan's own frame against a world-aligned grid,
-a finer grid and no grid for ICP; ``surface`` the tile's 1 m height field (holes
-filled from the nearest cell) against holes filled linearly, and the default
+a finer grid and no grid for ICP; ``icpgrid`` the ICP grid twice and half the
+fitted one; ``surface`` the tile's 1 m height field (holes filled from the
+nearest cell) against holes filled linearly or smoothed, and the default
 scene's own mesh against the same scene resampled as a sparse tile; ``start``
 ICP from the coarse fit against ICP from the true pose and from no motion;
-``skip`` the step length (overlap of consecutive scans); ``metric`` the ICP
-metric; ``crop`` ICP with the moving points that its start places
-beyond the fixed scan's along-track edges (less the inlier distance) left out;
-``epsilon`` thinner generalized-ICP planes (less weight on residuals along the
-surface); ``steep`` ICP without the points on steep surfaces; ``rows`` the same
-flight with another along-track ray spacing (the sensor's elevation step: does
-ICP lock onto the ray rows?); ``fix`` the remedies together.
+``skip`` the step length (overlap of consecutive scans, and the step against
+the spacing of the ray rows); ``metric`` the ICP metric; ``epsilon`` thinner
+generalized-ICP planes (less weight on residuals along the surface);
+``steep`` ICP without the points on steep surfaces; ``rows`` the same flight
+with another along-track ray spacing (the sensor's elevation step: does ICP
+lock onto the ray rows?).
 """
 
 from __future__ import annotations
@@ -49,7 +54,8 @@ from helpers.config import Config
 from helpers.dataset import DEFAULT_WAYPOINTS, MAP_CELL, Dataset, LazyScans, fitted_loop
 from helpers.features import grid_average
 from helpers.fitting import fit_to_flight, flight_of
-from helpers.icp import GICP_EPSILON, gicp_covariances, icp_cloud, refine_icp
+from helpers.frames import track_frames
+from helpers.icp import GICP_EPSILON, gicp_covariances, icp_cloud
 from helpers.mapio import IDENTITY_FRAME, height_field_from_points, read_map
 from helpers.odometry import Frame, describe, register_frames
 from helpers.scene import HeightField
@@ -61,15 +67,18 @@ FAILED = 1.0  # m: a pair whose translation is off by more failed (its own colum
 SMOOTHING = 2.0  # cells: the Gaussian that takes the steep slopes out of a tile's surface (the surface experiment)
 SPARSE_DENSITY = 1.8  # points per m² when the default scene is resampled as a tile (Autzen's density)
 
-# name: (scene, metres above the ground, first waypoint of the stretch)
+# name: (scene, metres above the ground, first waypoint of the stretch, surface variant: see surface_of)
 FLIGHTS = {
-    "default-700": ("default", None, 0),
-    "default-150": ("default", 150.0, 0),
-    "seed11-700": ("seed11", None, 0),
-    "autzen-150": ("autzen", 150.0, 0),
-    "autzen-250": ("autzen", 250.0, 0),
+    "default-700": ("default", None, 0, "tile"),
+    "default-150": ("default", 150.0, 0, "tile"),
+    "sparse-150": ("default", 150.0, 0, "sparse"),
+    "seed11-700": ("seed11", None, 0, "tile"),
+    "autzen-150": ("autzen", 150.0, 0, "tile"),
+    "autzen-250": ("autzen", 250.0, 0, "tile"),
 }
-EXPERIMENT_FLIGHTS = ("default-150", "autzen-150")
+EXPERIMENT_FLIGHTS = ("sparse-150", "autzen-150")
+EXPERIMENTS = ("stages", "before", "grid", "icpgrid", "surface", "start", "skip", "metric", "crop", "epsilon", "steep")
+EXPERIMENTS += ("rows",)
 
 
 def surface_of(scene: str, variant: str = "tile") -> tuple[HeightField, np.ndarray]:
@@ -110,11 +119,12 @@ def _filled_linearly(field: HeightField, points: np.ndarray) -> HeightField:
     return HeightField(field.x0, field.y0, field.cell, z, field.labels, field.valid)
 
 
-def flight(name: str, pairs: int, skip: int | None = None, variant: str = "tile", elevation_step=None):
+def flight(name: str, pairs: int, skip: int | None = None, variant: str | None = None, elevation_step=None):
     """(dataset, fitted config) of a flight: a stretch giving ``pairs`` pairs of accepted scans;
-    ``elevation_step`` (deg): the sensor's along-track ray spacing, when not the reference's."""
-    scene, above, first = FLIGHTS[name]
-    field, xy = surface_of(scene, variant)
+    ``variant``: its surface, when not the flight's own (:func:`surface_of`); ``elevation_step`` (deg):
+    the sensor's along-track ray spacing, when not the reference's."""
+    scene, above, first, own = FLIGHTS[name]
+    field, xy = surface_of(scene, variant or own)
     ground = float(np.median(field.z[field.cell_of(xy)]))
     altitude = 700.0 if above is None else ground + above
     sensor = SensorConfig(altitude=altitude, seed=0)
@@ -157,33 +167,11 @@ def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own",
     return describe(Frame(points, None, icp_points, {}, ready), config)
 
 
-def icp(moving: Frame, fixed: Frame, init: np.ndarray, config: Config, keep=None) -> np.ndarray:
-    """ICP as the odometry runs it, optionally on a subset ``keep`` of the moving points."""
-    fit = config.registration
-    source = moving.icp if keep is None else moving.icp_points[keep]
-    return refine_icp(
-        source,
-        fixed.icp,
-        init,
-        fit.metric,
-        fit.inlier_distance,
-        fit.icp_max_iterations,
-        fit.icp_tolerance,
-        fit.icp_backend,
-    )[0]
-
-
-def overlap_crop(moving: Frame, fixed: Frame, T: np.ndarray, margin: float) -> np.ndarray:
-    """Moving ICP points that ``T`` places inside the fixed scan's along-track extent, shrunk by ``margin``."""
-    x = (moving.icp_points @ T[:3, :3].T + T[:3, 3])[:, 0]
-    low, high = fixed.icp_points[:, 0].min() + margin, fixed.icp_points[:, 0].max() - margin
-    return (x >= low) & (x <= high)
-
-
-def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), crop=False, epsilon=None, steep=None):
-    """Relative transforms per stage, (pairs, 4, 4) each, and the true ones (``truth``)."""
-    fit = config.registration
-    indices = np.arange(0, len(data.poses), fit.skip_frames)
+def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), epsilon=None, steep=None):
+    """Relative transforms per stage, (pairs, 4, 4) each, and the true ones (``truth``). ``icp`` is the
+    odometry's own registration (:func:`helpers.odometry.register_frames`, with the overlap crop when
+    ``[registration] overlap_crop`` is on); ``icp<truth`` and ``icp<identity`` the same ICP from those starts."""
+    indices = np.arange(0, len(data.poses), config.registration.skip_frames)
     out = {"truth": [], "coarse": []} | {f"icp<{s}" if s != "coarse" else "icp": [] for s in starts}
     previous = None
     for k, index in enumerate(indices):
@@ -193,13 +181,17 @@ def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), crop=
             pair = register_frames(current, previous, config)
             out["truth"].append(truth)
             out["coarse"].append(pair.T_coarse)
-            for start in starts:
-                init = {"coarse": pair.T_coarse, "truth": truth, "identity": np.eye(4)}[start]
-                keep = overlap_crop(current, previous, init, fit.inlier_distance) if crop else None
-                T = pair.T_fine if start == "coarse" and not crop else icp(current, previous, init, config, keep)
-                out["icp" if start == "coarse" else f"icp<{start}"].append(T)
+            out["icp"].append(pair.T_fine)
+            for start in starts[1:]:
+                init = {"truth": truth, "identity": np.eye(4)}[start]
+                out[f"icp<{start}"].append(track_frames(current, previous, config, init)[0].T_fine)
         previous = current
     return {stage: np.array(transforms) for stage, transforms in out.items()}
+
+
+def uncropped(config: Config) -> Config:
+    """``config`` with ICP on the whole moving scan (no overlap crop)."""
+    return config.with_values(registration={"overlap_crop": False})
 
 
 def chained(relative: np.ndarray, n: int = CHAIN) -> np.ndarray:
@@ -255,7 +247,7 @@ def main() -> None:
     parser.add_argument(
         "--experiment",
         default="stages",
-        choices=["stages", "grid", "surface", "start", "skip", "metric", "crop", "epsilon", "steep", "rows", "fix"],
+        choices=EXPERIMENTS,
     )
     parser.add_argument("--pairs", type=int, default=60, help="pairs of accepted scans per flight (default 60)")
     args = parser.parse_args()
@@ -272,8 +264,10 @@ def main() -> None:
         if args.experiment == "rows":
             for step in (0.2, 0.16, 0.1):
                 data, config = flight(name, args.pairs, elevation_step=step)
-                report(f"{name} rows {step} deg", measure(data, config, starts=("coarse", "truth")))
-                report(f"{name} rows {step} cropped", measure(data, config, crop=True))
+                report(
+                    f"{name} rows {step} deg uncropped", measure(data, uncropped(config), starts=("coarse", "truth"))
+                )
+                report(f"{name} rows {step} deg", measure(data, config))
             continue
         if args.experiment == "skip":
             for skip in (1, 2, 3, 4):
@@ -283,10 +277,20 @@ def main() -> None:
         data, config = flight(name, args.pairs)
         fit = config.registration
         if args.experiment == "stages":
-            report(f"{name} skip {fit.skip_frames} grid {config.features.grid_step}", measure(data, config))
+            label = f"{name} grids {config.features.grid_step}/{fit.icp_grid_step}"
+            report(label, measure(data, config))
+        elif args.experiment == "before":
+            report(f"{name} before (no crop)", measure(data, uncropped(config)))
+            report(f"{name} as shipped", measure(data, config))
         elif args.experiment == "grid":
             for grid in ("own", "world", "fine", "raw"):
                 report(f"{name} grid {grid}", measure(data, config, grid))
+        elif args.experiment == "icpgrid":
+            for share in (2.0, 1.0, 0.5):
+                step = round(fit.icp_grid_step * share, 3)
+                report(
+                    f"{name} icp grid {step}", measure(data, config.with_values(registration={"icp_grid_step": step}))
+                )
         elif args.experiment == "start":
             report(name, measure(data, config, starts=("coarse", "truth", "identity")))
         elif args.experiment == "metric":
@@ -294,8 +298,8 @@ def main() -> None:
                 report(f"{name} {metric}", measure(data, config.with_values(registration={"metric": metric})))
         elif args.experiment == "crop":
             for grid in ("own", "fine"):
-                report(f"{name} {grid} uncropped", measure(data, config, grid))
-                report(f"{name} {grid} cropped", measure(data, config, grid, crop=True))
+                report(f"{name} {grid} uncropped", measure(data, uncropped(config), grid))
+                report(f"{name} {grid} cropped", measure(data, config, grid))
         elif args.experiment == "epsilon":
             config = config.with_values(registration={"icp_backend": "open3d"})
             for epsilon in (GICP_EPSILON, GICP_EPSILON / 10, GICP_EPSILON / 100):
@@ -303,13 +307,6 @@ def main() -> None:
         elif args.experiment == "steep":
             for steep in (None, 60.0, 45.0, 30.0):
                 report(f"{name} steep {steep}", measure(data, config, steep=steep))
-        elif args.experiment == "fix":
-            report(f"{name} as is", measure(data, config))
-            report(f"{name} cropped fine", measure(data, config, "fine", crop=True))
-            config = config.with_values(registration={"icp_backend": "open3d"})
-            thin = GICP_EPSILON / 100
-            report(f"{name} eps {thin:g} cropped", measure(data, config, crop=True, epsilon=thin))
-            report(f"{name} eps {thin:g} cropped fine", measure(data, config, "fine", crop=True, epsilon=thin))
     print(f"{time.perf_counter() - start:.0f} s (a busy machine)")
 
 

@@ -119,6 +119,9 @@ class RegistrationConfig(BoundedTable):
         1e-3, "ICP stops earlier once an iteration changes its RMSE (m) and inlier share by less"
     )
     icp_fallback_rmse: float = param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
+    overlap_crop: bool = param(
+        True, "ICP leaves out the moving points that land beyond the fixed scan's footprint (false: the reference)"
+    )
     mode: str = param(
         "global", "global: features and a robust fit for every scan (the reference); tracking: ICP from the last motion"
     )
@@ -144,6 +147,7 @@ class RegistrationConfig(BoundedTable):
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
         self._between("icp_tolerance", 0.0, 1.0, "zero or a positive number (above 1 ICP stops at once)")
         self._between("icp_fallback_rmse", MIN_RMSE, MAX_LENGTH, "a positive number of metres")
+        self._check("overlap_crop", lambda v: isinstance(v, bool), "true or false")
         self._one_of("mode", MODES)
         self._between("tracking_max_jump_m", 0.0, MAX_LENGTH, "zero or a positive number of metres")
         self._between("tracking_max_jump_deg", 0.0, 180.0, "zero or a positive number of degrees")
@@ -278,7 +282,7 @@ class Config:
 
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
-    "registration": {"icp_grid_step": 0.0},
+    "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
     "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }

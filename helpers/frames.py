@@ -29,6 +29,7 @@ from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
 from .icp import IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
+from .overlap import crop, cropped_cloud
 from .registration import estimate_rigid_msac
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
@@ -204,7 +205,16 @@ def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: Registrat
     source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
     target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
     icp = icp or IcpService.from_config(fit)
-    return icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=fit.icp_max_iterations)
+    cap = fit.icp_max_iterations
+    T, rmse = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
+    if fit.overlap_crop:  # again on the moving points the fixed scan also saw, where ICP put them (helpers.overlap)
+        if isinstance(source, IcpCloud):
+            cropped = cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
+        else:
+            cropped = crop(source, fixed.icp_points, T, fit.inlier_distance)
+        if cropped is not source:
+            T, rmse = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
+    return T, rmse
 
 
 def _add(*timings: dict) -> dict:

@@ -1,0 +1,94 @@
+"""ICP on the part of the moving scan that the fixed scan also saw (stage 3c).
+
+Two consecutive scans overlap only in part: the moving scan's leading edge
+covers ground the fixed scan never saw. ICP still pairs those points with
+the fixed scan's nearest edge points whenever they lie within its inlier
+distance, and each such pair pulls the moving scan back towards the fixed
+one: the estimated step comes out short, every step the same way, so a
+whole loop shrinks and no loop closure can undo it (issue 21;
+``benchmarks/bench_bias.py`` measures it). Leaving those points out before
+ICP removes the pull.
+
+The fixed scan's *footprint* is its outline seen from above in its own
+frame (the sensor frame's z is up and the rays look down): the convex hull
+of its points' x and y. A moving point is kept when the registration's
+start ``T_fixed_moving`` places it inside that outline shrunk by a margin
+(the inlier distance: nearer to the edge, a point may pair with an edge
+point it does not belong to). The outline is the fixed scan's whatever the
+scans' headings, so a turn, a hover or a yaw of 90 degrees between the two
+crops along whichever edges they share, not along one direction of flight.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.spatial import ConvexHull, QhullError
+
+from .icp import IcpCloud, icp_cloud
+from .icp_service import surface_rmse
+
+MIN_KEPT = 30  # points: a crop that keeps fewer leaves ICP too little to fit six degrees of freedom; keep all then
+
+
+def footprint(points: np.ndarray) -> np.ndarray | None:
+    """The outline of ``points`` (N, 3) seen from above: (F, 3) half-planes ``a x + b y + c <= 0``
+    with ``(a, b)`` a unit outward normal, so ``a x + b y + c`` is the signed distance to that edge.
+    None when the points have no area from above (fewer than three, or all on one line)."""
+    xy = np.asarray(points, dtype=np.float64)[:, :2]
+    if len(xy) < 3:
+        return None
+    try:
+        return ConvexHull(xy).equations
+    except QhullError:  # on one line or one point
+        return None
+
+
+def inside(outline: np.ndarray | None, points: np.ndarray, margin: float) -> np.ndarray:
+    """(N,) bool: which ``points`` lie inside ``outline`` (:func:`footprint`) shrunk by ``margin`` metres,
+    seen from above (all of them when there is no outline)."""
+    points = np.asarray(points, dtype=np.float64)
+    if outline is None:
+        return np.ones(len(points), dtype=bool)
+    distance = points[:, :2] @ outline[:, :2].T + outline[:, 2]  # (N, F) signed distance to each edge
+    return (distance <= -margin).all(axis=1)
+
+
+def overlap(moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, margin: float) -> np.ndarray:
+    """(N,) bool: the ``moving`` points (N, 3) that ``T_fixed_moving`` places inside the footprint of
+    ``fixed`` (M, 3), shrunk by ``margin`` metres."""
+    T = np.asarray(T_fixed_moving, dtype=np.float64)
+    moved = np.asarray(moving, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+    return inside(footprint(fixed), moved, margin)
+
+
+def crop(moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, margin: float) -> np.ndarray:
+    """The ``moving`` points inside the fixed cloud's footprint at ``T_fixed_moving``; ``moving`` itself
+    (the same array) when the crop would leave out none of them or keep fewer than :data:`MIN_KEPT`."""
+    keep = overlap(moving, fixed, T_fixed_moving, margin)
+    if keep.all() or keep.sum() < MIN_KEPT:
+        return moving
+    return moving[keep]
+
+
+def cropped_cloud(moving: IcpCloud, fixed: np.ndarray, T_fixed_moving: np.ndarray, margin: float) -> IcpCloud:
+    """``moving`` (made ready for ICP) cropped to the fixed cloud's footprint and made ready again for the
+    same metric and back end (its normals then come from the kept points); ``moving`` itself when the crop
+    keeps every point (or too few, see :func:`crop`)."""
+    points = crop(moving.points, fixed, T_fixed_moving, margin)
+    if points is moving.points:
+        return moving
+    return icp_cloud(points, moving.metric, moving.backend)
+
+
+def register_overlap(icp, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, max_iterations=None):
+    """Register ``moving`` onto ``fixed`` as calling ``icp`` (a :class:`helpers.icp_service.IcpService`) does,
+    ``(T_fixed_moving, surface_rmse)``, with ICP on the moving points inside the fixed cloud's footprint (shrunk
+    by the service's inlier distance) at the start ``T_fixed_moving``; the score is measured on every point."""
+    points = crop(moving, fixed, T_fixed_moving, icp.inlier_distance)
+    if points is moving:
+        return icp(moving=moving, fixed=fixed, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
+    point_to_point = icp.metric == "point-to-point"
+    source = points if point_to_point else icp_cloud(points, icp.metric, icp.backend)
+    target = fixed if point_to_point else icp.ready(fixed)
+    T = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)[0]
+    return T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance)
