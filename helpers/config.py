@@ -55,7 +55,7 @@ NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # sets the lidar noise seed of the e
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
 MODES = ("global", "tracking")
-GRAPH_WEIGHTS = ("icp", "identity")
+GRAPH_WEIGHTS = ("hessian", "icp", "identity")
 LOOP_KERNELS = ("none", "huber", "cauchy")
 
 
@@ -227,9 +227,16 @@ class PoseGraphConfig(BoundedTable):
     edges_back_rmse_threshold: float = param(
         0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
     )
-    graph_weights: str = param("icp", "edge weights: icp (the sigmas below) or identity (the reference)")
+    graph_weights: str = param(
+        "icp", "edge weights: hessian (each registration's own, calibrated), icp (the sigmas below), identity"
+    )
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
+    information_scale: float = param(
+        0.16, "hessian weights: ICP's information (Hessian over residual variance) is multiplied by this"
+    )
+    min_sigma_m: float = param(0.001, "hessian weights: no edge is surer than this along any translation, metres")
+    min_sigma_deg: float = param(0.001, "hessian weights: ... nor than this about any axis, degrees")
     loop_kernel: str = param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
 
     def __post_init__(self):
@@ -239,12 +246,20 @@ class PoseGraphConfig(BoundedTable):
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
+        self._between("information_scale", MIN_SIGMA, 1.0, "a positive fraction (ICP is never surer than its Hessian)")
+        self._between("min_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
+        self._between("min_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
         self._one_of("loop_kernel", LOOP_KERNELS)
 
     @property
     def edge_sigmas(self) -> np.ndarray:
         """(6,) translation-first sigmas of a one-step edge with icp weights: metres, then radians."""
         return np.array([self.edge_sigma_m] * 3 + [math.radians(self.edge_sigma_deg)] * 3)
+
+    @property
+    def min_sigmas(self) -> np.ndarray:
+        """(6,) translation-first floor of an edge's sigmas with hessian weights: metres, then radians."""
+        return np.array([self.min_sigma_m] * 3 + [math.radians(self.min_sigma_deg)] * 3)
 
 
 @dataclass(frozen=True)

@@ -62,6 +62,7 @@ class PairRegistration:
     fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
     tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
     constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
+    information: np.ndarray | None = None  # 6 x 6 of T_fine, translation first, as the ICP service calibrates it
 
 
 def prepare(scan: np.ndarray, config: Config) -> Frame:
@@ -104,7 +105,8 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     guess, or fewer than ``tracking_min_overlap`` of the points paired."""
     fit = config.registration
     start = time.perf_counter()
-    T_fine, rmse = _icp(moving, fixed, motion, fit, icp)
+    refined = _icp(moving, fixed, motion, fit, icp)
+    T_fine, rmse = refined
     jump = np.linalg.inv(motion) @ T_fine
     jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
     paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
@@ -128,6 +130,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
         timings,
         tracked=True,
         constraint=constraint,
+        information=refined.information,
     )
     return pair, "; ".join(reasons)
 
@@ -170,12 +173,14 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
 
     # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
     start = time.perf_counter()
-    T_fine, rmse = _icp(moving, fixed, T_coarse, fit, icp)
+    refined = _icp(moving, fixed, T_coarse, fit, icp)
+    T_fine, rmse = refined
     if rmse > fit.icp_fallback_rmse and fallback is None:
-        T_retry, rmse_retry = _icp(moving, fixed, guess, fit, icp)
+        retry = _icp(moving, fixed, guess, fit, icp)
+        T_retry, rmse_retry = retry
         fallback = f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m from the robust fit; "
         if rmse_retry < rmse:
-            T_fine, rmse, T_coarse = T_retry, rmse_retry, guess
+            T_fine, rmse, T_coarse, refined = T_retry, rmse_retry, guess, retry
             fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
         else:
             fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
@@ -184,7 +189,17 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
         constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
     timings["icp"] = _ms(start)
     return PairRegistration(
-        moving.points, fixed.points, matches, inliers, T_coarse, T_fine, rmse, timings, fallback, constraint=constraint
+        moving.points,
+        fixed.points,
+        matches,
+        inliers,
+        T_coarse,
+        T_fine,
+        rmse,
+        timings,
+        fallback,
+        constraint=constraint,
+        information=refined.information,
     )
 
 
@@ -200,21 +215,23 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
 
 
 def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None):
-    """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``."""
+    """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``,
+    an :class:`helpers.icp.IcpResult` with its information."""
     wanted = (fit.metric, fit.icp_backend)
     source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
     target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
     icp = icp or IcpService.from_config(fit)
     cap = fit.icp_max_iterations
-    T, rmse = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
+    refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
     if fit.overlap_crop:  # again on the moving points the fixed scan also saw, where ICP put them (helpers.overlap)
+        T = refined[0]
         if isinstance(source, IcpCloud):
             cropped = cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
         else:
             cropped = crop(source, fixed.icp_points, T, fit.inlier_distance)
-        if cropped is not source:
-            T, rmse = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
-    return T, rmse
+        if cropped is not source:  # the result, information included, of the registration on the overlap
+            refined = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
+    return refined
 
 
 def _add(*timings: dict) -> dict:

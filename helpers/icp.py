@@ -25,11 +25,32 @@ from .config import ICP_BACKENDS, METRICS
 from .errors import SlamError
 from .features import to_cloud
 from .geometry import check_points
+from .information import hessian_information, plane_information
 from .registration import SAMPLE_SIZE
 
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
 GICP_EPSILON = 1e-3  # generalized ICP: a point's covariance is this thin across its plane (Open3D's default)
 SMALL_GICP_TYPES = {"point-to-point": "ICP", "point-to-plane": "PLANE_ICP", "plane-to-plane": "GICP"}
+
+
+@dataclass(frozen=True, eq=False)
+class IcpResult:
+    """A refined registration. It unpacks as ``T_fixed_moving, rmse`` (what :func:`refine_icp` always
+    returned); ``information`` (6 x 6, translation first, uncalibrated: :mod:`helpers.information`) says how
+    sure it is, None for point-to-point ICP, whose cost pins no plane and gives no meaningful one."""
+
+    T_fixed_moving: np.ndarray
+    rmse: float
+    information: np.ndarray | None = None
+
+    def __iter__(self):
+        return iter((self.T_fixed_moving, self.rmse))
+
+    def __getitem__(self, index):
+        return (self.T_fixed_moving, self.rmse)[index]
+
+    def __len__(self) -> int:
+        return 2
 
 
 def threads() -> int:
@@ -140,8 +161,9 @@ def refine_icp(
     max_iterations: int,
     tolerance: float,
     backend: str,
-) -> tuple[np.ndarray, float]:
-    """Refine the guess ``T_fixed_moving`` (4 x 4) by ICP; returns the refined ``(T_fixed_moving, rmse)``.
+) -> IcpResult:
+    """Refine the guess ``T_fixed_moving`` (4 x 4) by ICP; returns the refined ``(T_fixed_moving, rmse)``
+    as an :class:`IcpResult`, which also carries the registration's ``information``.
 
     ``moving`` and ``fixed`` are (N, 3) arrays or :class:`IcpCloud` made by
     :func:`icp_cloud` for the same metric and back end (then nothing per
@@ -159,7 +181,9 @@ def refine_icp(
     ``rmse`` (m) is always the same measure, whatever the metric and back
     end: the root mean square distance from each moved moving point to its
     nearest fixed point, over the pairs closer than ``inlier_distance``;
-    ``inf`` if none is.
+    ``inf`` if none is. ``information``: small_gicp's Hessian of its cost, or
+    with Open3D the point-to-plane Hessian of the final pairs, each over its
+    residual variance (:mod:`helpers.information`).
     """
     init = np.asarray(T_fixed_moving, dtype=np.float64)
     if metric not in METRICS:
@@ -190,7 +214,12 @@ def refine_icp(
         result = reg.registration_icp(source, target, inlier_distance, init, estimation, criteria)
     transform = np.array(result.transformation)
     rmse = float(result.inlier_rmse) if len(result.correspondence_set) else float("inf")
-    return transform, rmse
+    information = None
+    if metric != "point-to-point":
+        information = plane_information(
+            moving.points, fixed.points, fixed.normals, transform, inlier_distance, fixed.nearest
+        )
+    return IcpResult(transform, rmse, information)
 
 
 def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance):
@@ -212,7 +241,10 @@ def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance
     squared, _ = fixed.nearest(moving.points @ transform[:3, :3].T + transform[:3, 3])
     paired = squared < inlier_distance**2
     rmse = float(np.sqrt(squared[paired].mean())) if paired.any() else float("inf")
-    return transform, rmse
+    information = None
+    if metric != "point-to-point":
+        information = hessian_information(result.H, result.error, result.num_inliers)
+    return IcpResult(transform, rmse, information)
 
 
 def _ready(cloud, what: str, metric: str, backend: str) -> IcpCloud:

@@ -16,6 +16,12 @@ Two measures of fit, never mixed up:
 * ``rmse``: ICP's own point-to-point RMSE over its pairs (the odometry's);
 * ``surface_rmse``: the RMS distance along the fixed cloud's normals (edges
   back and loops; :func:`surface_rmse` says why).
+
+Both calls return an :class:`helpers.icp.IcpResult`: it unpacks as
+``(T_fixed_moving, rmse)`` and carries the registration's ``information``
+CALIBRATED (:func:`helpers.information.calibrated`, with the service's
+``information_scale`` and ``min_sigmas``, ``[pose_graph]``'s in a run; None
+for point-to-point ICP), so every edge made from it says how sure it is.
 """
 
 from __future__ import annotations
@@ -25,8 +31,9 @@ from collections import OrderedDict
 import numpy as np
 
 from . import icp as _icp
-from .config import RegistrationConfig
+from .config import PoseGraphConfig, RegistrationConfig
 from .geometry import transform_points
+from .information import calibrated
 
 SURFACE_NEIGHBORS = 20  # neighbours of the normals that surface_rmse measures along
 PREPARED_CLOUDS = 64  # clouds the service keeps ready: the recent scans and the submaps around them
@@ -43,18 +50,40 @@ class IcpService:
         T_fixed_moving, surface = icp(moving=scan, fixed=submap, T_fixed_moving=guess, max_iterations=50)
     """
 
-    def __init__(self, *, metric: str, inlier_distance: float, tolerance: float, backend: str, max_iterations=30):
+    def __init__(
+        self,
+        *,
+        metric: str,
+        inlier_distance: float,
+        tolerance: float,
+        backend: str,
+        max_iterations=30,
+        information_scale: float | None = None,
+        min_sigmas=None,
+    ):
         self.metric, self.inlier_distance, self.tolerance, self.backend = metric, inlier_distance, tolerance, backend
         self.max_iterations = int(max_iterations)
+        graph = PoseGraphConfig()  # the calibration of the defaults when none is given
+        self.information_scale = graph.information_scale if information_scale is None else information_scale
+        self.min_sigmas = graph.min_sigmas if min_sigmas is None else np.asarray(min_sigmas, dtype=float)
         # the score needs normals: point-to-point ICP is scored on clouds prepared for point-to-plane
         self.surface_metric = metric if metric != "point-to-point" else "point-to-plane"
         self._prepared: OrderedDict = OrderedDict()  # id(points) -> (points, IcpCloud), least recently used first
 
     @classmethod
-    def from_config(cls, registration: RegistrationConfig, max_iterations: int | None = None) -> IcpService:
-        """The service of a run; ``max_iterations`` is the cap when a call gives none."""
+    def from_config(
+        cls,
+        registration: RegistrationConfig,
+        max_iterations: int | None = None,
+        pose_graph: PoseGraphConfig | None = None,
+    ) -> IcpService:
+        """The service of a run; ``max_iterations`` is the cap when a call gives none; ``pose_graph``
+        calibrates the information (the defaults' calibration when None)."""
         cap = registration.icp_max_iterations if max_iterations is None else max_iterations
+        pose_graph = pose_graph or PoseGraphConfig()
         return cls(
+            information_scale=pose_graph.information_scale,
+            min_sigmas=pose_graph.min_sigmas,
             metric=registration.metric,
             inlier_distance=registration.inlier_distance,
             tolerance=registration.icp_tolerance,
@@ -81,13 +110,14 @@ class IcpService:
             self._prepared.popitem(last=False)
 
     def align(self, *, moving, fixed, T_fixed_moving: np.ndarray, max_iterations: int | None = None):
-        """ICP from ``T_fixed_moving``; returns the refined ``(T_fixed_moving, rmse)`` (point-to-point).
+        """ICP from ``T_fixed_moving``; returns the refined ``(T_fixed_moving, rmse)`` (point-to-point)
+        as an :class:`helpers.icp.IcpResult` with its ``information``.
 
         ``moving`` and ``fixed`` are (N, 3) arrays or clouds made ready for
         this metric; arrays are prepared for this call only.
         """
         cap = self.max_iterations if max_iterations is None else max_iterations
-        return _icp.refine_icp(
+        fit = _icp.refine_icp(
             moving,
             fixed,
             T_fixed_moving,
@@ -97,15 +127,23 @@ class IcpService:
             tolerance=self.tolerance,
             backend=self.backend,
         )
+        return _icp.IcpResult(fit.T_fixed_moving, fit.rmse, self.calibrated(fit.information))
+
+    def calibrated(self, information):
+        """A raw information (:mod:`helpers.information`) scaled and capped as this service's are (None stays None)."""
+        if information is None:
+            return None
+        return calibrated(information, self.information_scale, self.min_sigmas)
 
     def __call__(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, max_iterations=None):
         """Register ``moving`` onto ``fixed`` (arrays, prepared through the cache)
-        and score the result: ``(T_fixed_moving, surface_rmse)``."""
+        and score the result: ``(T_fixed_moving, surface_rmse)``, an :class:`helpers.icp.IcpResult`."""
         source, target = self.ready(moving), self.ready(fixed)
         if self.metric == "point-to-point":
             source, target = moving, fixed
-        T, _ = self.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
-        return T, surface_rmse(moving, self.ready(fixed), T, self.inlier_distance)
+        fit = self.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
+        T = fit.T_fixed_moving
+        return _icp.IcpResult(T, surface_rmse(moving, self.ready(fixed), T, self.inlier_distance), fit.information)
 
     def constraint(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray) -> float:
         """How well the pairs of a registration pin its translation (:func:`helpers.icp.pairing`)."""

@@ -277,9 +277,10 @@ def best_scan_registration(
             if not 0 <= i < min(len(scans), len(poses)):
                 raise SlamError(f"submap {submap_id} holds scan {i}, but only {len(scans)} scans were given")
             init = np.linalg.inv(check_pose(poses[i], f"the pose of scan {i}")) @ submap_pose
-            T_i_j, rmse = icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init, max_iterations=cap)
+            fit = icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init, max_iterations=cap)
+            (T_i_j, rmse), information = fit, getattr(fit, "information", None)
             if best is None or rmse < best.surface_rmse:
-                best = Edge(i, int(current_id), check_pose(T_i_j, "the ICP result"), float(rmse))
+                best = Edge(i, int(current_id), check_pose(T_i_j, "the ICP result"), float(rmse), information)
     return best
 
 

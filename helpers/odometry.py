@@ -42,6 +42,7 @@ class OdometryResult:
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
     tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
     constraint: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K-1,) helpers.icp.pairing, per step
+    information: list = field(default_factory=list)  # (K-1,) 6 x 6 calibrated information per step, or None
 
 
 class Odometry:
@@ -58,7 +59,7 @@ class Odometry:
 
     def __init__(self, config: Config, T_map_first: np.ndarray, icp: IcpService | None = None) -> None:
         self.config = config
-        self.icp = icp or IcpService.from_config(config.registration)
+        self.icp = icp or IcpService.from_config(config.registration, pose_graph=config.pose_graph)
         self.poses = [check_pose(T_map_first, "the first pose")]
         self.relative: list[np.ndarray] = []
         self.indices: list[int] = []
@@ -117,6 +118,7 @@ class Odometry:
             fallbacks=list(self.fallbacks),
             tracked=np.array([p.tracked for p in pairs], dtype=bool),
             constraint=np.array([p.constraint for p in pairs], dtype=float),
+            information=[p.information for p in pairs],
         )
 
 

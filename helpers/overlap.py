@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .icp import IcpCloud, icp_cloud
+from .icp import IcpCloud, IcpResult, icp_cloud
 from .icp_service import surface_rmse
 
 MIN_KEPT = 30  # points: a crop that keeps fewer leaves ICP too little to fit six degrees of freedom; keep all then
@@ -90,5 +90,6 @@ def register_overlap(icp, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_movi
     point_to_point = icp.metric == "point-to-point"
     source = points if point_to_point else icp_cloud(points, icp.metric, icp.backend)
     target = fixed if point_to_point else icp.ready(fixed)
-    T = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)[0]
-    return T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance)
+    fit = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
+    T = fit[0]  # an IcpResult carries the registration's information: keep it with the edge
+    return IcpResult(T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance), getattr(fit, "information", None))

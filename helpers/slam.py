@@ -28,7 +28,7 @@ import numpy as np
 
 from .config import Config
 from .errors import SlamError
-from .factors import Edge, information_from_sigmas
+from .factors import BetweenFactor, Edge, information_from_sigmas
 from .features import grid_average
 from .frames import prepare
 from .geometry import check_points, check_pose
@@ -124,12 +124,12 @@ class EdgesBack:
         kept = []
         for back in range(2, min(self.edges_back, j) + 1):
             guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
-            T_i_j, rmse = self.register(
+            fit = self.register(
                 moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
             )
-            self.tried += 1
+            (T_i_j, rmse), self.tried = fit, self.tried + 1
             if rmse < self.rmse_threshold:
-                kept.append(Edge(j - back, j, T_i_j, rmse))
+                kept.append(Edge(j - back, j, T_i_j, rmse, fit.information))
             else:
                 log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
         self.edges.extend(kept)
@@ -153,7 +153,7 @@ class Slam:
         self.config = config = config or Config()
         anchor = np.eye(4) if anchor is None else anchor
         self.anchor = check_pose(np.asarray(anchor, dtype=float), "the anchor pose")
-        self.icp = IcpService.from_config(config.registration)
+        self.icp = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given = odometry
         self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
@@ -249,17 +249,34 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     With ``graph_weights = "icp"`` every registration gets the sigmas of
     ``[pose_graph] edge_sigma_m`` and ``edge_sigma_deg``, times the number of
     steps an edge spans: an edge to the scan ``k`` nodes back is measured on a
-    smaller overlap and is less sure (notebook 6 measures how much).
+    smaller overlap and is less sure (notebook 6 measures how much). With
+    ``"hessian"`` every edge carries its own calibrated information (each
+    registration's, :mod:`helpers.information`); an edge without one (an odometry
+    given without it, point-to-point ICP) falls back to the icp sigmas.
     """
-    icp_weights = config.pose_graph.graph_weights == "icp"
-    sigmas = config.pose_graph.edge_sigmas if icp_weights else np.ones(6)
+    weights = config.pose_graph.graph_weights
+    fixed = weights != "identity"
+    sigmas = config.pose_graph.edge_sigmas if fixed else np.ones(6)
+    own = weights == "hessian"
+    steps = getattr(odometry, "information", ())
+    steps = steps if len(steps) == len(odometry.relative) else ()
     graph = PoseGraph()
-    graph.add_node(odometry.poses[0])
-    for step in odometry.relative:
-        graph.append(step, sigmas)
+    pose = odometry.poses[0]
+    graph.add_node(pose)
+    for k, step in enumerate(odometry.relative):
+        pose = pose @ step
+        j = graph.add_node(pose)
+        if own and len(steps) and steps[k] is not None:
+            graph.add_factor(BetweenFactor(j - 1, j, step, steps[k]))
+        else:
+            graph.add_odometry(j - 1, j, step, sigmas)
     for edge in extra:
-        graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if icp_weights else 1))
+        if own and edge.information is not None:
+            graph.add_factor(BetweenFactor(edge.i, edge.j, edge.relative, edge.information))
+        else:
+            graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if fixed else 1))
     information = information_from_sigmas(sigmas)
     for loop in loops:
-        graph.add_loop(loop.i, loop.j, loop.relative, information)
+        mine = getattr(loop, "information", None) if own else None
+        graph.add_loop(loop.i, loop.j, loop.relative, information if mine is None else mine)
     return graph

@@ -1,0 +1,138 @@
+"""The trust flag's rules (helpers.health) on built runs whose answer is known: a straight flight of
+2 m steps (or a hover), odometry steps and loops with chosen information, the graph optimised for real."""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from helpers.config import Config
+from helpers.factors import Edge
+from helpers.health import CORRECTION_FLOOR_M, FALSE_LOOP_SIGMAS, WEAK_SIGMA_M, assess, loop_residuals
+from helpers.information import calibrated
+from helpers.odometry import OdometryResult
+from helpers.slam import build_pose_graph
+
+CONFIG = Config().with_values(pose_graph={"graph_weights": "hessian"})
+NODES = 30
+
+
+def _info(sigma_m, sigma_deg=0.05):
+    """A diagonal information: ``sigma_m`` (m, one number or x y z) and ``sigma_deg`` on every rotation."""
+    sigmas = np.concatenate([np.broadcast_to(sigma_m, 3), np.full(3, np.radians(sigma_deg))])
+    return np.diag(sigmas**-2.0)
+
+
+def _at(x, y=0.0):
+    T = np.eye(4)
+    T[:2, 3] = x, y
+    return T
+
+
+def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config=CONFIG):
+    """A run of NODES nodes ``step`` m apart along x, optimised with the given edges (a SlamResult's fields)."""
+    informations = [_info(0.05)] * (NODES - 1) if informations is None else informations
+    relative = np.array([_at(step)] * (NODES - 1))
+    poses = np.array([_at(step * k) for k in range(NODES)])
+    odometry = OdometryResult(
+        indices=np.arange(NODES) * 3,
+        poses=poses,
+        relative=relative,
+        n_matches=np.full(NODES - 1, 100),
+        n_inliers=np.full(NODES - 1, 50),
+        rmse=np.full(NODES - 1, 0.2),
+        timings={},
+        constraint=np.full(NODES - 1, constraint),
+        information=list(informations),
+    )
+    graph = build_pose_graph(odometry, list(extra), list(loops), config)
+    optimised = graph.optimize(anchor_pose=poses[0], loop_kernel=config.pose_graph.loop_kernel)
+    queries = [SimpleNamespace(closure=loop, submap_ids=[0], best_scan_constraint=0.5) for loop in loops]
+    return SimpleNamespace(
+        config=config,
+        indices=odometry.indices,
+        odometry=odometry,
+        graph=optimised,
+        loops=list(loops),
+        queries=queries,
+        extra_edges=list(extra),
+        edges_back_tried=len(extra),
+    )
+
+
+def test_a_straight_well_pinned_run_is_trusted():
+    health = assess(_run())
+    assert health.trusted, health.problems
+    assert health.counts["weakest_step_sigma_m"] < WEAK_SIGMA_M
+
+
+def test_steps_loose_along_the_track_are_weak_by_their_information():
+    """A fifth of the steps know their position along the track only to 1 m (flat ground): the weak
+    direction is read from their information, though ICP's constraint says nothing is wrong."""
+    loose = _info([1.0, 0.05, 0.05])
+    informations = [loose if k % 5 == 0 else _info(0.05) for k in range(NODES - 1)]
+    health = assess(_run(informations=informations, constraint=0.5))
+    assert health.counts["n_weak_steps"] == len(range(0, NODES - 1, 5))
+    assert not health.trusted and "too flat" in health.warning()
+    assert health.counts["weakest_step_sigma_m"] > 0.99
+
+
+def test_steps_without_information_fall_back_to_the_constraint():
+    health = assess(_run(informations=[None] * (NODES - 1), constraint=0.001))
+    assert health.counts["n_weak_steps"] == NODES - 1 and not health.trusted
+
+
+def _loop_off_by(metres, sigma_m):
+    """A loop edge from node 0 to the last node, ``metres`` off along y, with ``sigma_m`` in its information."""
+    true = _at(2.0 * (NODES - 1))
+    return Edge(0, NODES - 1, true @ _at(0.0, metres), 0.1, calibrated(_info(sigma_m), 1.0, np.zeros(6)))
+
+
+def test_a_loop_is_judged_against_the_graph_with_its_own_information():
+    """A loop 1.5 m off a graph that is sure of itself: with an information that says 0.1 m it is 15
+    sigmas off and named; one that says 0.5 m leaves it within 5 sigmas (not named)."""
+    for sigma, named in ((0.1, True), (0.5, False)):
+        run = _run(loops=[_loop_off_by(1.5, sigma)])
+        (metres, _, sigmas), *_ = loop_residuals(run)
+        assert metres > 1.0 and (sigmas > FALSE_LOOP_SIGMAS) == named
+        health = assess(run)
+        assert health.counts["n_loops_against_graph"] == named
+        assert ("most likely false" in health.warning()) == named
+
+
+def test_a_true_loop_a_little_off_is_not_called_false():
+    """A loop 0.4 m off (a true loop by the evaluation's rule, 1 m) and 8 sigmas off by its information:
+    improbable, yet not a false loop. The odometry is stiff, so the graph stays where it is."""
+    run = _run(informations=[_info(0.005)] * (NODES - 1), loops=[_loop_off_by(0.4, 0.05)])
+    assert loop_residuals(run)[0][2] > FALSE_LOOP_SIGMAS
+    assert assess(run).counts["n_loops_against_graph"] == 0
+
+
+def test_edges_back_moving_the_trajectory_are_no_loop_correction():
+    """No loop, but edges back that pull every step 10 % longer: the graph moves the trajectory by
+    metres, which the rule on loop corrections must not count (there is no loop)."""
+    extra = [Edge(k, k + 2, _at(4.4), 0.1, _info(0.05)) for k in range(NODES - 2)]
+    run = _run(extra=extra)
+    moved = np.abs(run.graph.poses[:, 0, 3] - run.odometry.poses[:, 0, 3]).max()
+    assert moved > 1.0
+    health = assess(run)
+    assert health.counts["largest_correction_m"] == 0.0 and health.trusted, health.problems
+
+
+def test_a_hovering_flight_has_its_loop_corrections_judged_in_metres():
+    """A hover (every step 0 m): the share of the distance flown is undefined, so a loop that moves
+    the trajectory by a metre is judged against the floor, and one moving it by centimetres passes."""
+    for off, trusted in ((2.0, False), (0.05, True)):
+        informations = [_info(0.2)] * (NODES - 1)  # hovering drifts: the loop is the surer edge
+        loop = Edge(0, NODES - 1, _at(0.0, off), 0.1, _info(0.01))
+        run = _run(step=0.0, informations=informations, loops=[loop])
+        health = assess(run)
+        assert health.counts["distance_flown_m"] == 0.0
+        assert (health.counts["largest_correction_m"] > CORRECTION_FLOOR_M) != trusted
+        assert health.trusted == trusted, health.problems
+        assert trusted or "the flight hovered" in health.warning()
+
+
+def test_the_loop_correction_is_what_the_loops_moved():
+    """A loop that agrees with the odometry moves nothing; the correction counts only the loops' effect."""
+    run = _run(loops=[_loop_off_by(0.0, 0.05)])
+    assert assess(run).counts["largest_correction_m"] < 0.01
