@@ -55,6 +55,17 @@ def _main(argv=None) -> int:
         help="keep the configured values (by default the geometry-dependent ones the config file does not set "
         "are fitted to the flight's height and waypoint spacing: helpers.fitting)",
     )
+    run.add_argument(
+        "--gnss",
+        metavar="FILE",
+        help="GNSS positions per scan, map frame (.csv index,x,y,z or TUM .txt/.tum, t = scan index), added to "
+        "the pose graph as GPS factors",
+    )
+    run.add_argument(
+        "--gnss-sigma",
+        metavar="H[,V]",
+        help="sigma of a GNSS position, metres, horizontal[,vertical] (default: the [sensor] gnss sigmas)",
+    )
 
     site = sub.add_parser("site", help="execute the notebooks and build them into a book that opens from disk")
     site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
@@ -122,10 +133,15 @@ def _run(args) -> int:
 
     check_output_place(args.out, MARKER, LEGACY_MARKER)
     config = load_config(args.config)
+    gnss = _gnss(args, config)
     start = time.perf_counter()
     interactive = sys.stderr.isatty()
     data = create_dataset(args.map, args.waypoints, config.sensor, progress=interactive)
     created = time.perf_counter() - start
+    if gnss is not None:
+        gnss.check_flight(len(data), args.gnss)
+        sigma = ", ".join(f"{v:g}" for v in gnss.sigmas[1:])
+        print(f"GNSS: {len(gnss.indices)} positions from {args.gnss}, sigma {sigma} m (horizontal, vertical)")
     flight = flight_of(data)
     if not args.reference_values:
         config, reasons = fit_to_flight(flight, config, given_keys(args.config))
@@ -136,7 +152,7 @@ def _run(args) -> int:
             f"{flight.spacing:.1f} m; --reference-values keeps the reference's):"
         )
         print("\n".join(f"  {line}" for line in reasons))
-    result = run_slam(data, config, progress=interactive)
+    result = run_slam(data, config, progress=interactive, gnss=gnss)
     result.runtime_s = {"dataset": created, **result.runtime_s}
     m = run_metrics(data, result, map_errors(result.map_points, data.map_points))
     out = write_run(result, args.out, m, data.poses[result.indices])
@@ -150,6 +166,24 @@ def _run(args) -> int:
     if not health.trusted:
         print(f'warning: {health.warning()} (metrics.json: "trusted": false)', file=sys.stderr)
     return 0
+
+
+def _gnss(args, config):
+    """The GNSS fixes ``--gnss`` names, each with the sigma of ``--gnss-sigma`` or else of ``[sensor]``."""
+    if args.gnss is None:
+        if args.gnss_sigma is not None:
+            raise SlamError("--gnss-sigma needs --gnss FILE (the positions it is the sigma of)")
+        return None
+    from .gnss import parse_sigma, read_gnss
+
+    if args.gnss_sigma is not None:
+        sigmas = parse_sigma(args.gnss_sigma)
+    elif config.sensor.gnss:
+        horizontal, vertical = config.sensor.gnss_sigma_horizontal, config.sensor.gnss_sigma_vertical
+        sigmas = [horizontal, horizontal, vertical]
+    else:
+        raise SlamError("--gnss needs the positions' sigma: --gnss-sigma H[,V] (m) or [sensor] gnss sigmas")
+    return read_gnss(args.gnss, sigmas)
 
 
 if __name__ == "__main__":

@@ -35,12 +35,15 @@ import numpy as np
 
 from .errors import SlamError
 from .limits import (
+    MAX_ACCELERATION,
+    MAX_ANGULAR_ACCELERATION,
     MAX_EDGES_BACK,
     MAX_ITERATIONS,
     MAX_LENGTH,
     MAX_NEIGHBORS,
     MAX_RADIUS,
     MAX_SCANS,
+    MAX_SPEED,
     MAX_TRIALS,
     MIN_GRID,
     MIN_RMSE,
@@ -238,6 +241,18 @@ class PoseGraphConfig(BoundedTable):
     min_sigma_m: float = param(0.001, "hessian weights: no edge is surer than this along any translation, metres")
     min_sigma_deg: float = param(0.001, "hessian weights: ... nor than this about any axis, degrees")
     loop_kernel: str = param("cauchy", "robust kernel on loop edges: none (the reference), huber or cauchy")
+    motion_factor: bool = param(
+        False, "a soft constant-velocity factor over every three consecutive nodes (false: the reference)"
+    )
+    motion_speed: float = param(
+        10.0, "motion factor: the drone's nominal ground speed, m/s (turns the step between nodes into a time)"
+    )
+    motion_acceleration: float = param(
+        1.0, "motion factor: the acceleration the drone may have, m/s^2 (its translation sigma: a dt^2)"
+    )
+    motion_angular_acceleration: float = param(
+        20.0, "motion factor: the change of turn rate the drone may have, deg/s^2 (its rotation sigma)"
+    )
 
     def __post_init__(self):
         self._within("edges_back", 1, MAX_EDGES_BACK)
@@ -250,6 +265,12 @@ class PoseGraphConfig(BoundedTable):
         self._between("min_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("min_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
         self._one_of("loop_kernel", LOOP_KERNELS)
+        self._check("motion_factor", lambda v: isinstance(v, bool), "true or false")
+        self._between("motion_speed", MIN_SIGMA, MAX_SPEED, "a positive number of metres per second")
+        self._between("motion_acceleration", MIN_SIGMA, MAX_ACCELERATION, "a positive number of m/s^2")
+        self._between(
+            "motion_angular_acceleration", MIN_SIGMA, MAX_ANGULAR_ACCELERATION, "a positive number of deg/s^2"
+        )
 
     @property
     def edge_sigmas(self) -> np.ndarray:
@@ -299,7 +320,7 @@ class Config:
 REFERENCE_WORKFLOW = {
     "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
     "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0},
-    "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
+    "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none", "motion_factor": False},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order
 

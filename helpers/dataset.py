@@ -16,6 +16,8 @@ from .config import Config, SensorConfig, noise_seed_from_environment
 from .configfile import config_to_toml
 from .errors import SlamError
 from .geometry import transform_points
+from .gnss import FILE_NAME as GNSS_FILE
+from .gnss import simulate_gnss, write_gnss
 from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
 from .progress import progress_bar
@@ -66,6 +68,7 @@ class Dataset:
     sensor: SensorConfig
     name: str
     truth: ScanBatch | None = None  # the true hits (None until first asked for, with LazyScans)
+    gnss: np.ndarray | None = None  # (N, 3) simulated GNSS positions, map frame (None: no GNSS, the default)
 
     def __len__(self) -> int:
         return len(self.scans)
@@ -143,9 +146,12 @@ def create_dataset(
     sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
     surface = Surface.from_height_field(field)
+    gnss = None
+    if sensor.gnss:
+        gnss = simulate_gnss(poses[:, :3, 3], sensor.gnss_sigma_horizontal, sensor.gnss_sigma_vertical, sensor.seed)
     if lazy:
         scans = LazyScans(surface, poses, sensor)
-        return Dataset(scans, poses, xyz, field, frame, sensor, name)
+        return Dataset(scans, poses, xyz, field, frame, sensor, name, gnss=gnss)
     bar = progress_bar(len(poses), "casting scans", enabled=progress)
     try:
         batch = cast_scans(surface, poses, sensor, bar)
@@ -157,7 +163,8 @@ def create_dataset(
             f"{len(empty)} of {len(poses)} scans came back empty (indices {index_ranges(empty)}): "
             "those waypoints see no map within max_range"
         )
-    return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, ScanBatch([], batch.hits, batch.labels))
+    truth = ScanBatch([], batch.hits, batch.labels)
+    return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, truth, gnss)
 
 
 def fitted_loop(field: HeightField, spacing: float = DEFAULT_SPACING) -> np.ndarray:
@@ -193,8 +200,8 @@ def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, senso
 
 
 def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False) -> Path:
-    """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM)
-    and ``map_gt.ply`` into ``out_dir``, all or nothing: the files are
+    """Write ``scans/000000.ply ...`` (sensor frame), ``poses_gt.txt`` (TUM),
+    ``map_gt.ply`` and, with GNSS, ``gnss.csv`` (:mod:`helpers.gnss`) into ``out_dir``, all or nothing: the files are
     written in a temporary folder beside it that replaces it at the end. An
     existing ``out_dir`` is replaced only if it is empty or an earlier
     dataset (:func:`helpers.outdir.atomic_dir`)."""
@@ -207,6 +214,8 @@ def write_dataset(dataset: Dataset, out_dir: str | Path, progress: bool = False)
         bar.close()
         write_tum(work / "poses_gt.txt", dataset.poses)
         write_ply(work / "map_gt.ply", dataset.map_points)
+        if dataset.gnss is not None:
+            write_gnss(work / GNSS_FILE, dataset.gnss)
         sensor = config_to_toml(Config(sensor=dataset.sensor), ("sensor",), "the sensor that produced this dataset")
         (work / "sensor.toml").write_text(sensor)
     return Path(out_dir)

@@ -169,3 +169,93 @@ def loop_noise_factory(kernel: str, scale: float | None):
         raise SlamError(f"kernel_scale must be a positive number of sigmas, got {scale}")
     estimator = _ESTIMATORS[kernel].Create(scale)
     return lambda information: gtsam.noiseModel.Robust.Create(estimator, gaussian(information))
+
+
+@dataclass(frozen=True)
+class ConstantVelocityFactor:
+    """A soft motion model over three consecutive nodes ``i, j, k``: the step
+    ``j -> k``, seen from node ``j``, equals the step ``i -> j`` seen from node
+    ``i`` (a drone keeps its speed, and its turn rate, from one node to the
+    next). Its error is ``Logmap(T_i_j^-1 T_j_k)``, zero for a straight line at
+    a steady speed and for a steady turn alike; ``sigmas`` (x y z in m, rx ry rz
+    in rad, translation first) say how much the step may change between
+    consecutive nodes (:func:`constant_velocity_sigmas` derives them from an
+    acceleration). Directions no scan pins then follow the flight's momentum
+    instead of sliding freely."""
+
+    i: int
+    j: int
+    k: int
+    sigmas: np.ndarray
+
+    @property
+    def nodes(self) -> tuple[int, ...]:
+        return (self.i, self.j, self.k)
+
+    def to_gtsam(self, context: FactorContext) -> gtsam.NonlinearFactor:
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(self.sigmas, float)[_TO_GTSAM])
+        return gtsam.CustomFactor(noise, list(self.nodes), _constant_velocity_error)
+
+
+def _constant_velocity_error(factor, values, jacobians) -> np.ndarray:
+    """GTSAM's callback for :class:`ConstantVelocityFactor`: the error (rotation first) and, when asked
+    for, its Jacobians with respect to the three poses, chained from GTSAM's own (``between``, ``Logmap``)."""
+    a, b, c = (values.atPose3(key) for key in factor.keys())
+    d_a, d_b1, d_b2, d_c, d_first, d_second, d_log = (np.zeros((6, 6), order="F") for _ in range(7))
+    first = a.between(b, d_a, d_b1)  # T_i_j
+    second = b.between(c, d_b2, d_c)  # T_j_k
+    error = gtsam.Pose3.Logmap(first.between(second, d_first, d_second), d_log)
+    if jacobians is not None:
+        jacobians[0] = d_log @ d_first @ d_a
+        jacobians[1] = d_log @ (d_first @ d_b1 + d_second @ d_b2)
+        jacobians[2] = d_log @ d_second @ d_c
+    return error
+
+
+def constant_velocity_sigmas(step_m: float, speed: float, acceleration: float, angular_acceleration: float):
+    """The (6,) translation-first sigmas of a :class:`ConstantVelocityFactor`.
+
+    The simulator has no clock (a scan per waypoint), so the time between two
+    nodes is their step over the drone's nominal ground speed:
+    ``dt = step_m / speed``. A drone that accelerates by ``a`` for ``dt``
+    changes its step by ``a dt^2`` (the second difference of its positions),
+    and one whose turn rate changes by ``alpha`` per second changes its turn by
+    ``alpha dt^2``: ``acceleration`` (m/s^2) gives the translation sigma,
+    ``angular_acceleration`` (rad/s^2) the rotation sigma.
+    """
+    values = np.array([step_m, speed, acceleration, angular_acceleration], dtype=float)
+    if not (np.all(np.isfinite(values)) and np.all(values > 0)):
+        raise SlamError(f"a constant-velocity sigma needs a positive step, speed and accelerations, got {values}")
+    dt = step_m / speed
+    return np.array([acceleration * dt**2] * 3 + [angular_acceleration * dt**2] * 3)
+
+
+def motion_factors(relative, table) -> list[ConstantVelocityFactor]:
+    """A :class:`ConstantVelocityFactor` over every three consecutive nodes of a chain whose odometry steps
+    are ``relative`` ((K-1, 4, 4)), with the accelerations of ``table`` (``[pose_graph]``): the step between
+    nodes is the odometry's median step (steps shorter than a millimetre count as one)."""
+    relative = np.asarray(relative, dtype=float).reshape(-1, 4, 4)
+    if len(relative) < 2:
+        return []
+    step = max(float(np.median(np.linalg.norm(relative[:, :3, 3], axis=1))), 1e-3)
+    angular = np.radians(table.motion_angular_acceleration)
+    sigmas = constant_velocity_sigmas(step, table.motion_speed, table.motion_acceleration, angular)
+    return [ConstantVelocityFactor(k - 2, k - 1, k, sigmas) for k in range(2, len(relative) + 1)]
+
+
+@dataclass(frozen=True)
+class PositionFactor:
+    """A position fix of node ``node`` (a GNSS receiver's: GTSAM's GPS factor):
+    the sensor is at ``position`` (map frame, m) with ``sigmas`` (x y z, m)."""
+
+    node: int
+    position: np.ndarray
+    sigmas: np.ndarray
+
+    @property
+    def nodes(self) -> tuple[int, ...]:
+        return (self.node,)
+
+    def to_gtsam(self, context: FactorContext) -> gtsam.NonlinearFactor:
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(self.sigmas, float))
+        return gtsam.GPSFactor(self.node, np.asarray(self.position, float), noise)

@@ -29,6 +29,9 @@ MAX_LENGTH = 1_000.0  # m: grid steps and distances; a kilometre spans a whole s
 MAX_RADIUS = 10_000.0  # m: a search radius beyond any tile a height field can hold (helpers.mapio.MAX_MAP_CELLS)
 MAX_RANGE = 1_000_000.0  # m: lidar range; far beyond any lidar's and still finite in float32 rays
 MIN_RMSE = 0.001  # m: RMSE thresholds; a millimetre is below any lidar's noise
+MAX_SPEED = 1_000.0  # m/s: three times the speed of sound, beyond any aircraft that carries a lidar
+MAX_ACCELERATION = 1_000.0  # m/s^2: a hundred g, beyond what any airframe survives
+MAX_ANGULAR_ACCELERATION = 100_000.0  # deg/s^2: a full turn in about 0.1 s from rest, beyond any drone
 MIN_SIGMA = 1e-6  # edge sigmas: an information of 1e12 already; 1e-300 would make it infinite
 
 

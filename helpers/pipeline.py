@@ -31,14 +31,19 @@ PICTURE_PACKAGES = ("viz", "site", "exercises")  # subpackages that draw, publis
 
 
 def run_slam(
-    dataset: Dataset, config: Config | None = None, progress: bool = False, odometry: OdometryResult | None = None
+    dataset: Dataset,
+    config: Config | None = None,
+    progress: bool = False,
+    odometry: OdometryResult | None = None,
+    gnss=None,
 ) -> SlamResult:
     """Estimate the trajectory and the map from ``dataset.scans`` alone (the
     first ground-truth pose anchors the first node, as in the reference; no
     other true pose is read: :mod:`helpers.evaluation` grades the result).
     ``odometry``: reuse one already computed on this dataset with this
-    configuration (the stages after it run as usual)."""
-    slam = Slam(config, anchor=dataset.poses[0], odometry=odometry)
+    configuration (the stages after it run as usual). ``gnss``: position
+    fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph."""
+    slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss)
     bar = progress_bar(len(dataset), "slam", enabled=progress)
     loops = 0
     for index in range(len(dataset)):

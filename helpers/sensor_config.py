@@ -16,6 +16,7 @@ from typing import ClassVar
 
 from .errors import SlamError
 from .limits import (
+    MAX_LENGTH,
     MAX_RANGE,
     MAX_RAYS_PER_FLIGHT,
     MAX_RAYS_PER_SCAN,
@@ -39,7 +40,11 @@ class SensorConfig(BoundedTable):
     max_range: float = param(800.0, "returns farther than this many metres are lost")
     range_noise: float = param(0.02, "standard deviation of the range error, metres")
     dropout: float = param(0.01, "probability that a ray gives no return")
-    seed: int = param(0, "seed of the range noise and dropouts")
+    seed: int = param(0, "seed of the range noise and dropouts (and of the GNSS noise)")
+    gnss_sigma_horizontal: float = param(
+        0.0, "GNSS: sigma of the simulated positions' x and y, metres (0 with the vertical one: no GNSS, the default)"
+    )
+    gnss_sigma_vertical: float = param(0.0, "GNSS: sigma of the simulated positions' z, metres")
 
     def __post_init__(self):
         for name in ("azimuth", "elevation"):
@@ -67,6 +72,19 @@ class SensorConfig(BoundedTable):
         self._between("range_noise", 0.0, self.max_range, "zero or a positive number of metres up to max_range,")
         self._check("dropout", lambda v: 0 <= v < 1, "a probability in [0, 1)")
         self._check("seed", lambda v: isinstance(v, int) and v >= 0, "a non-negative integer")
+        for name in ("gnss_sigma_horizontal", "gnss_sigma_vertical"):
+            self._between(name, 0.0, MAX_LENGTH, "zero (no GNSS) or a positive number of metres")
+        if (self.gnss_sigma_horizontal > 0) != (self.gnss_sigma_vertical > 0):
+            raise SlamError(
+                "[sensor] gnss_sigma_horizontal and gnss_sigma_vertical must both be 0 (no GNSS) or both be "
+                f"positive, got {self.gnss_sigma_horizontal} and {self.gnss_sigma_vertical}: a receiver that "
+                "knows one axis exactly does not exist"
+            )
+
+    @property
+    def gnss(self) -> bool:
+        """Whether the simulator writes GNSS positions (both sigmas positive)."""
+        return self.gnss_sigma_horizontal > 0
 
     @property
     def rays_per_scan(self) -> int:

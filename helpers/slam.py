@@ -28,7 +28,7 @@ import numpy as np
 
 from .config import Config
 from .errors import SlamError
-from .factors import BetweenFactor, Edge, information_from_sigmas
+from .factors import BetweenFactor, Edge, information_from_sigmas, motion_factors
 from .features import grid_average
 from .frames import prepare
 from .geometry import check_points, check_pose
@@ -147,15 +147,18 @@ class Slam:
     (identity when None). ``odometry``: an odometry already computed for
     these scans with this configuration; the run then reuses its poses and
     registers nothing scan to scan (a back end for tests and notebooks).
+    ``gnss``: position fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph.
     """
 
-    def __init__(self, config: Config | None = None, anchor=None, odometry: OdometryResult | None = None) -> None:
+    def __init__(
+        self, config: Config | None = None, anchor=None, odometry: OdometryResult | None = None, gnss=None
+    ) -> None:
         self.config = config = config or Config()
         anchor = np.eye(4) if anchor is None else anchor
         self.anchor = check_pose(np.asarray(anchor, dtype=float), "the anchor pose")
         self.icp = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
         self.odometry = Odometry(config, self.anchor, self.icp)
-        self.given = odometry
+        self.given, self.gnss = odometry, gnss
         self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
         graph = config.pose_graph
         self.edges_back = EdgesBack(
@@ -219,6 +222,8 @@ class Slam:
         start = time.perf_counter()
         extra = self.edges_back.sorted()
         graph = build_pose_graph(odometry, extra, self.loops.loops, config)
+        for fix in self.gnss.factors(self.indices) if self.gnss is not None else ():
+            graph.add_factor(fix)
         optimized = graph.optimize(anchor_pose=self.anchor, loop_kernel=config.pose_graph.loop_kernel)
         runtime["pose_graph"] = time.perf_counter() - start
         # 5. The map: every accepted scan at its optimised pose, merged on a grid.
@@ -279,4 +284,7 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     for loop in loops:
         mine = getattr(loop, "information", None) if own else None
         graph.add_loop(loop.i, loop.j, loop.relative, information if mine is None else mine)
+    if config.pose_graph.motion_factor:
+        for factor in motion_factors(odometry.relative, config.pose_graph):
+            graph.add_factor(factor)
     return graph
