@@ -43,6 +43,7 @@ from .limits import (
     MAX_NEIGHBORS,
     MAX_RADIUS,
     MAX_SCANS,
+    MAX_SIGMAS,
     MAX_SPEED,
     MAX_TRIALS,
     MIN_GRID,
@@ -60,6 +61,7 @@ ICP_BACKENDS = ("small_gicp", "open3d")
 MODES = ("global", "tracking")
 GRAPH_WEIGHTS = ("hessian", "icp", "identity")
 LOOP_KERNELS = ("none", "huber", "cauchy")
+LOOP_SEARCHES = ("uncertainty", "growth")
 
 
 def noise_seed_from_environment() -> int:
@@ -187,6 +189,16 @@ class LoopClosureConfig(BoundedTable):
     loop_search_growth: float = param(
         0.02, "search radius grows by this share of the distance flown (drift grows with it; 0: the reference)"
     )
+    search: str = param(
+        "uncertainty",
+        "how far a query reaches: uncertainty (the graph's, gated in sigmas) or growth (per metre flown)",
+    )
+    search_sigmas: float = param(
+        3.0, "uncertainty search: an old submap is a candidate if within the radius this many sigmas away"
+    )
+    skip_after_loop: int = param(
+        0, "no query for this many accepted scans after a loop edge closed on the same place (0: query every scan)"
+    )
     max_attempts: int = param(3, "submaps registered at most per query, nearest first")
     max_returned: int = param(3, "matching submaps kept at most, best first")
     icp_max_iterations: int = param(50, "most ICP iterations when checking a submap or a loop edge")
@@ -203,6 +215,9 @@ class LoopClosureConfig(BoundedTable):
         self._within("sub_map_thresh", 0, MAX_SCANS)
         # A place is never farther than the path flown to it: at growth 1 every old submap is already in reach.
         self._between("loop_search_growth", 0.0, 1.0, "zero or a positive fraction")
+        self._one_of("search", LOOP_SEARCHES)
+        self._between("search_sigmas", 0.0, MAX_SIGMAS, "zero or a positive number of sigmas")
+        self._within("skip_after_loop", 0, MAX_SCANS)
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
@@ -319,7 +334,7 @@ class Config:
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
     "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
-    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0},
+    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth"},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none", "motion_factor": False},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order

@@ -32,6 +32,7 @@ MIN_RMSE = 0.001  # m: RMSE thresholds; a millimetre is below any lidar's noise
 MAX_SPEED = 1_000.0  # m/s: three times the speed of sound, beyond any aircraft that carries a lidar
 MAX_ACCELERATION = 1_000.0  # m/s^2: a hundred g, beyond what any airframe survives
 MAX_ANGULAR_ACCELERATION = 100_000.0  # deg/s^2: a full turn in about 0.1 s from rest, beyond any drone
+MAX_SIGMAS = 100.0  # a gate in sigmas: beyond a few the Gaussian says nothing more; 100 already admits everything
 MIN_SIGMA = 1e-6  # edge sigmas: an information of 1e12 already; 1e-300 would make it infinite
 
 

@@ -3,7 +3,10 @@ by ICP, then turn the best scan-to-scan match into a loop edge.
 
 :class:`LoopCloser` owns the submaps and every loop rule, in one place:
 which submaps are old enough (:func:`eligible_submaps`), how far the search
-reaches (:func:`search_radius`, from :func:`radius_after`), the check of the candidates
+reaches (``[loop_closure] search``: ``"growth"``, :func:`search_radius` from
+:func:`radius_after`; ``"uncertainty"``, the graph's relative covariance and
+:func:`helpers.uncertainty.mahalanobis_gate`), which places were closed just
+before (``skip_after_loop``), the check of the candidates
 (:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`)
 and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). Figures,
 the health report and the exercises call these rules; none re-derives one.
@@ -21,40 +24,45 @@ ICP is an ``icp_fn(moving=, fixed=, T_fixed_moving=, max_iterations=) ->
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
-from .config import LoopClosureConfig, MapConfig
+from .config import LoopClosureConfig, MapConfig, PoseGraphConfig
 from .errors import SlamError
 from .factors import Edge
 from .geometry import check_points, check_pose
 from .icp_service import SURFACE_NEIGHBORS, icp_with, surface_normals, surface_rmse
-from .submaps import SubmapIndex, scan_ids_of
+from .loopsearch import (
+    IcpFn,
+    LoopCandidates,
+    closed_places,
+    distance_flown_since,
+    eligible_submaps,
+    find_loop_candidates,
+    radius_after,
+    search_radius,
+)
+from .submaps import SubmapIndex, centre_scan_id, scan_ids_of
+from .uncertainty import RelativeUncertainty
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SURFACE_NEIGHBORS", "LoopCloser", "LoopQuery", "icp_with", "surface_normals", "surface_rmse"]
-
-IcpFn = Callable[..., tuple[np.ndarray, float]]
-
-
-class LoopCandidates(NamedTuple):
-    """Matching submaps, best (lowest RMSE) first, and what the search tried.
-
-    ``poses[k]`` is the scan's pose ``T_map_sensor`` that ICP found against
-    submap ``ids[k]``; it seeds the scan-to-scan registration.
-    """
-
-    ids: np.ndarray  # (L,) submap ids
-    scores: np.ndarray  # (L,) surface RMSE, m
-    poses: np.ndarray  # (L, 4, 4)
-    n_eligible: int = 0  # submaps 0 .. n_eligible - 1 were old enough to be searched
-    radius: np.ndarray = np.zeros(0)  # (S,) search radius (m) around each of the S submaps given, grown with the flight
-    tried_ids: np.ndarray = np.zeros(0, dtype=int)  # (A,) the submaps registered by ICP, nearest first
-    tried: np.ndarray = np.zeros(0)  # (A,) their surface RMSE, m (the names of LoopQuery)
+__all__ = [
+    "SURFACE_NEIGHBORS",
+    "LoopCandidates",
+    "LoopCloser",
+    "LoopQuery",
+    "distance_flown_since",
+    "eligible_submaps",
+    "find_loop_candidates",
+    "icp_with",
+    "radius_after",
+    "search_radius",
+    "surface_normals",
+    "surface_rmse",
+]
 
 
 @dataclass(frozen=True)
@@ -65,7 +73,7 @@ class LoopQuery:
     node: int
     n_submaps: int  # submaps built when the query ran (centres in ``SlamResult.submaps.centres``)
     n_eligible: int  # submaps 0 .. n_eligible - 1 were old enough to be searched
-    radius: np.ndarray  # (n_submaps,) search radius (m) around each submap, grown with the distance flown since it
+    radius: np.ndarray  # (n_submaps,) search radius (m) around each submap (its growth, or from the uncertainty)
     tried_ids: np.ndarray  # the submaps registered by ICP, nearest first
     tried: np.ndarray  # their surface RMSE (m), in the same order
     submap_ids: np.ndarray  # the submaps below loop_closure_threshold, best first
@@ -84,13 +92,26 @@ class LoopCloser:
 
     ``clouds`` and ``poses`` are every accepted scan so far (own frames) and
     the odometry poses the submaps are built with. It reads
-    ``[loop_closure]`` and ``[map]`` only; ``icp`` is the run's ICP service.
+    ``[loop_closure]`` and ``[map]``; ``icp`` is the run's ICP service. With
+    ``search = "uncertainty"`` it keeps the run's graph
+    (:class:`helpers.uncertainty.RelativeUncertainty`, the edges' noise from
+    ``graph_settings``): the odometry steps from ``poses``, its own loop
+    edges, and the edges back the run hands to :meth:`add_edges`.
     """
 
-    def __init__(self, settings: LoopClosureConfig, map_settings: MapConfig, icp: IcpFn) -> None:
+    def __init__(
+        self,
+        settings: LoopClosureConfig,
+        map_settings: MapConfig,
+        icp: IcpFn,
+        graph_settings: PoseGraphConfig | None = None,
+    ) -> None:
         self.settings, self.icp = settings, icp
         self.submaps = SubmapIndex(map_settings.n_scans_per_submap, map_settings.align_grid_step)
         self.queries: list[LoopQuery] = []
+        searched = settings.search == "uncertainty"
+        self.uncertainty = RelativeUncertainty(graph_settings or PoseGraphConfig()) if searched else None
+        self.skipped = 0  # queries left out: a loop had just closed on the same place
 
     @property
     def loops(self) -> list[Edge]:
@@ -102,22 +123,52 @@ class LoopCloser:
         ``n_scans_per_submap`` scans) and, once there are more than
         ``sub_map_thresh`` submaps, query the old ones for a loop."""
         self.submaps.add_scan(cloud, pose)
+        self._follow(node, poses)
         if len(self.submaps) <= self.settings.sub_map_thresh:
             return None
         query = self.query(node, cloud, pose, clouds, poses)
         if query is not None:
             self.queries.append(query)
+            if query.closure is not None and self.uncertainty is not None:
+                self.uncertainty.add_edge(query.closure, loop=True)
         return query
+
+    def _follow(self, node: int, poses) -> None:
+        """Nodes up to ``node`` into the uncertainty graph, each joined to the one before by its odometry step."""
+        if self.uncertainty is not None:
+            while self.uncertainty.num_nodes <= node:
+                self.uncertainty.add_node(poses[self.uncertainty.num_nodes])
+
+    def add_edges(self, edges) -> None:
+        """Edges the run measured besides the odometry steps and the loops (its edges back), for the uncertainty."""
+        if self.uncertainty is not None:
+            for edge in edges:
+                self.uncertainty.add_edge(edge)
 
     def query(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses) -> LoopQuery | None:
         """One loop query of node ``node``: (1) the old submaps near its pose,
         verified by ICP; (2) the best scan of the matching submaps, kept as a
         loop edge if :meth:`accepts` it. None if no submap was registered."""
         submaps, settings = self.submaps, self.settings
-        # 1. Old submaps within the (growing) search radius, verified by ICP.
+        # 1. Old submaps within the search radius (grown, or from the graph's uncertainty), verified by ICP.
+        covariances = None
+        self._follow(node, poses)
+        if self.uncertainty is not None:
+            n, eligible = submaps.n_scans_per_submap, eligible_submaps(len(submaps), settings)
+            covariances = self.uncertainty.position_covariances([centre_scan_id(k, n) for k in range(eligible)])
         candidates = find_loop_candidates(
-            submaps.points, submaps.centres, cloud, pose, len(submaps) - 1, self.icp, settings
+            submaps.points,
+            submaps.centres,
+            cloud,
+            pose,
+            len(submaps) - 1,
+            self.icp,
+            settings,
+            covariances=covariances,
+            closed=closed_places(self.loops, node, settings.skip_after_loop, submaps.n_scans_per_submap),
         )
+        if candidates.closed:
+            self.skipped += 1
         if not len(candidates.tried_ids):
             return None
         # 2. The best scan-to-scan match of the matching submaps becomes the loop edge, if accepted.
@@ -155,100 +206,6 @@ class LoopCloser:
         return rmse < self.settings.rmse_threshold and not constraint < self.settings.min_constraint
 
 
-def eligible_submaps(n_submaps: int, settings: LoopClosureConfig) -> int:
-    """How many submaps (0 .. n - 1) a query may search when ``n_submaps`` are
-    built: all but the ``sub_map_thresh`` newest."""
-    return max(0, n_submaps - settings.sub_map_thresh)
-
-
-def radius_after(flown, settings: LoopClosureConfig):
-    """The search radius (m) around a place left ``flown`` metres of flight
-    ago (a number or an array): ``loop_closure_search_radius +
-    loop_search_growth * flown``. Odometry drift grows with the distance
-    flown, so an old place can look farther away than it is; a growth of 0
-    is the reference's fixed radius."""
-    return settings.loop_closure_search_radius + settings.loop_search_growth * np.asarray(flown, float)
-
-
-def search_radius(submap_centres: np.ndarray, position: np.ndarray, settings: LoopClosureConfig) -> np.ndarray:
-    """The search radius (m) around every submap for a scan at ``position``
-    (:func:`radius_after` the distance flown since the submap,
-    :func:`distance_flown_since`)."""
-    return radius_after(distance_flown_since(np.asarray(submap_centres, float).reshape(-1, 3), position), settings)
-
-
-def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:
-    """For every submap, the path length from its centre through the later centres to ``position``."""
-    steps = np.linalg.norm(np.diff(submap_centres, axis=0), axis=1)
-    to_end = np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
-    return to_end + np.linalg.norm(position - submap_centres[-1])
-
-
-def find_loop_candidates(
-    submaps: Sequence[np.ndarray],
-    submap_centres: np.ndarray,
-    scan_points: np.ndarray,
-    scan_pose: np.ndarray,
-    current_submap_id: int,
-    icp_fn: IcpFn,
-    settings: LoopClosureConfig,
-) -> LoopCandidates:
-    """Old submaps that the current scan registers onto, as the reference helper does.
-
-    1. Only submaps ``0 .. current_submap_id - sub_map_thresh`` are eligible
-       (``current_submap_id`` is the newest built submap; the ``sub_map_thresh``
-       newest are skipped).
-    2. Keep those whose centre is nearer than :func:`search_radius` to the
-       scan's position.
-    3. Sort them by distance and register the scan to at most ``max_attempts``
-       of them, from ``scan_pose``.
-    4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
-       ``max_returned``, lowest RMSE first.
-
-    The names in quotes are the fields of ``settings``.
-    """
-    centres = np.asarray(submap_centres, dtype=float).reshape(-1, 3)
-    scan_points = check_points(scan_points, "the current scan")
-    scan_pose = check_pose(scan_pose, "the current scan pose")
-    _check_search(submaps, centres, current_submap_id)
-    max_attempts = settings.max_attempts
-
-    # 1.-2. eligible submaps within the (growing) radius, nearest first
-    position = scan_pose[:3, 3]
-    eligible = centres[: eligible_submaps(current_submap_id + 1, settings)]
-    distance = np.linalg.norm(eligible - position, axis=1)
-    radius = search_radius(centres[: current_submap_id + 1], position, settings)
-    near = np.flatnonzero(distance < radius[: len(eligible)])
-    near = near[np.argsort(distance[near], kind="stable")]
-
-    # 3. verify the nearest few by ICP
-    found, tried = [], []
-    for submap_id in near[:max_attempts]:
-        pose, rmse = icp_fn(
-            moving=scan_points,
-            fixed=submaps[submap_id],
-            T_fixed_moving=scan_pose,
-            max_iterations=settings.icp_max_iterations,
-        )
-        log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)
-        tried.append(rmse)
-        if rmse < settings.loop_closure_threshold:
-            found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
-
-    # 4. best first
-    found.sort(key=lambda item: item[0])
-    found = found[: settings.max_returned]
-    return LoopCandidates(
-        np.array([f[1] for f in found], dtype=int),
-        np.array([f[0] for f in found], dtype=float),
-        np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
-        n_eligible=len(eligible),
-        radius=radius,
-        tried_ids=near[:max_attempts].astype(int),
-        tried=np.array(tried, dtype=float),
-    )
-
-
 def best_scan_registration(
     scan_points: np.ndarray,
     current_id: int,
@@ -282,12 +239,3 @@ def best_scan_registration(
             if best is None or rmse < best.surface_rmse:
                 best = Edge(i, int(current_id), check_pose(T_i_j, "the ICP result"), float(rmse), information)
     return best
-
-
-def _check_search(submaps, centres, current_submap_id) -> None:
-    if not np.all(np.isfinite(centres)):
-        raise SlamError("the submap centres contain NaN or infinite values")
-    if not 0 <= current_submap_id < min(len(centres), len(submaps)):
-        raise SlamError(
-            f"current_submap_id {current_submap_id} is not among the {min(len(centres), len(submaps))} submaps given"
-        )

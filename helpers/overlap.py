@@ -92,4 +92,6 @@ def register_overlap(icp, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_movi
     target = fixed if point_to_point else icp.ready(fixed)
     fit = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
     T = fit[0]  # an IcpResult carries the registration's information: keep it with the edge
-    return IcpResult(T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance), getattr(fit, "information", None))
+    return IcpResult(
+        T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance), getattr(fit, "information", None)
+    )

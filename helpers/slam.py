@@ -159,7 +159,7 @@ class Slam:
         self.icp = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given, self.gnss = odometry, gnss
-        self.loops = LoopCloser(config.loop_closure, config.map, self.icp)
+        self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph)
         graph = config.pose_graph
         self.edges_back = EdgesBack(
             self.icp,
@@ -208,6 +208,7 @@ class Slam:
         # 3. Edges back, from the chained odometry.
         start = time.perf_counter()
         edges = self.edges_back.add(node, self.clouds, relative)
+        self.loops.add_edges(edges)  # the loop search's uncertainty graph
         self.runtime["edges_back"] += time.perf_counter() - start
         return Step(index, True, node, poses[node], fallback, query, tuple(edges))
 

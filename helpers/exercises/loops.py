@@ -68,13 +68,13 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
 def fixed_radius_loops(result, end: int) -> list[int]:
     """The nodes 0 .. ``end`` of ``result`` that close a loop when the
     search radius does not grow (``loop_search_growth = 0``, the reference's
-    fixed radius): the pipeline's own loop closer run again on the run's
-    scans and odometry poses."""
+    fixed radius, queried at every scan): the pipeline's own loop closer run
+    again on the run's scans and odometry poses."""
     from ..icp_service import IcpService
     from ..loopclosure import LoopCloser
 
     config = result.config
-    fixed = replace(config.loop_closure, loop_search_growth=0.0)
+    fixed = replace(config.loop_closure, loop_search_growth=0.0, search="growth", skip_after_loop=0)
     loops = LoopCloser(fixed, config.map, IcpService.from_config(config.registration))
     clouds, poses = result.clouds[: end + 1], result.poses_odometry[: end + 1]
     for node, (cloud, pose) in enumerate(zip(clouds, poses, strict=True)):

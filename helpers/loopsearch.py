@@ -1,0 +1,192 @@
+"""Where a loop query looks: which old submaps are eligible and how far
+around each the search reaches (:mod:`helpers.loopclosure` asks; the health
+report and the figures use the same rules).
+
+Two searches (``[loop_closure] search``): ``"growth"``, a radius grown with
+the distance flown since the submap (:func:`radius_after`), and
+``"uncertainty"``, the radius the graph's relative covariance allows
+(:func:`helpers.uncertainty.mahalanobis_gate`). :func:`closed_places` says
+which old places have just closed a loop, so that a query there can wait.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from .config import LoopClosureConfig
+from .errors import SlamError
+from .geometry import check_points, check_pose
+from .uncertainty import mahalanobis_gate
+
+log = logging.getLogger(__name__)
+
+IcpFn = Callable[..., tuple[np.ndarray, float]]
+
+
+class LoopCandidates(NamedTuple):
+    """Matching submaps, best (lowest RMSE) first, and what the search tried.
+
+    ``poses[k]`` is the scan's pose ``T_map_sensor`` that ICP found against
+    submap ``ids[k]``; it seeds the scan-to-scan registration.
+    """
+
+    ids: np.ndarray  # (L,) submap ids
+    scores: np.ndarray  # (L,) surface RMSE, m
+    poses: np.ndarray  # (L, 4, 4)
+    n_eligible: int = 0  # submaps 0 .. n_eligible - 1 were old enough to be searched
+    radius: np.ndarray = np.zeros(0)  # (S,) search radius (m) around each of the S submaps given, grown with the flight
+    tried_ids: np.ndarray = np.zeros(0, dtype=int)  # (A,) the submaps registered by ICP, nearest first
+    tried: np.ndarray = np.zeros(0)  # (A,) their surface RMSE, m (the names of LoopQuery)
+    closed: bool = False  # True: the nearest candidate's place had just closed a loop, and none was tried
+
+
+def eligible_submaps(n_submaps: int, settings: LoopClosureConfig) -> int:
+    """How many submaps (0 .. n - 1) a query may search when ``n_submaps`` are
+    built: all but the ``sub_map_thresh`` newest."""
+    return max(0, n_submaps - settings.sub_map_thresh)
+
+
+def radius_after(flown, settings: LoopClosureConfig):
+    """The search radius (m) around a place left ``flown`` metres of flight
+    ago (a number or an array): ``loop_closure_search_radius +
+    loop_search_growth * flown``. Odometry drift grows with the distance
+    flown, so an old place can look farther away than it is; a growth of 0
+    is the reference's fixed radius."""
+    return settings.loop_closure_search_radius + settings.loop_search_growth * np.asarray(flown, float)
+
+
+def search_radius(submap_centres: np.ndarray, position: np.ndarray, settings: LoopClosureConfig) -> np.ndarray:
+    """The search radius (m) around every submap for a scan at ``position``
+    (:func:`radius_after` the distance flown since the submap,
+    :func:`distance_flown_since`)."""
+    return radius_after(distance_flown_since(np.asarray(submap_centres, float).reshape(-1, 3), position), settings)
+
+
+def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np.ndarray:
+    """For every submap, the path length from its centre through the later centres to ``position``."""
+    steps = np.linalg.norm(np.diff(submap_centres, axis=0), axis=1)
+    to_end = np.concatenate([np.cumsum(steps[::-1])[::-1], [0.0]])
+    return to_end + np.linalg.norm(position - submap_centres[-1])
+
+
+def reach_of_submaps(
+    centres: np.ndarray, position: np.ndarray, n_eligible: int, settings: LoopClosureConfig, covariances=None
+) -> np.ndarray:
+    """The search radius (m) around each of the submaps whose ``centres`` are
+    given, for a scan at ``position``: :func:`search_radius` (growth), or,
+    given ``covariances`` ((n_eligible, 3, 3): each eligible centre's position
+    relative to the scan, m²), the gate's radius along the way to each
+    eligible centre (the newest submaps, never searched, keep the fixed radius)."""
+    if covariances is None:
+        return search_radius(centres, position, settings)
+    covariances = np.asarray(covariances, dtype=float).reshape(-1, 3, 3)
+    if len(covariances) != n_eligible:
+        raise SlamError(f"{len(covariances)} covariances given for {n_eligible} eligible submaps")
+    radius = np.full(len(centres), settings.loop_closure_search_radius)
+    _, radius[:n_eligible] = mahalanobis_gate(
+        centres[:n_eligible], position, covariances, settings.loop_closure_search_radius, settings.search_sigmas
+    )
+    return radius
+
+
+def closed_places(loops, node: int, window: int, n_scans_per_submap: int) -> set[int]:
+    """The submaps around the old end of every loop edge (``loops``, in the
+    order found) closed at most ``window`` accepted scans before ``node``,
+    reaching as far along the old track as the drone has flown since: a query
+    whose nearest candidate lies there would close the same place again."""
+    reach = -(-window // n_scans_per_submap) + 1  # submaps flown since, rounded up, and one for the place itself
+    closed = set()
+    for loop in reversed(loops):
+        if node - loop.j > window:
+            break
+        centre = loop.i // n_scans_per_submap
+        closed.update(range(centre - reach, centre + reach + 1))
+    return closed
+
+
+def find_loop_candidates(
+    submaps: Sequence[np.ndarray],
+    submap_centres: np.ndarray,
+    scan_points: np.ndarray,
+    scan_pose: np.ndarray,
+    current_submap_id: int,
+    icp_fn: IcpFn,
+    settings: LoopClosureConfig,
+    covariances: np.ndarray | None = None,
+    closed=(),
+) -> LoopCandidates:
+    """Old submaps that the current scan registers onto, as the reference helper does.
+
+    1. Only submaps ``0 .. current_submap_id - sub_map_thresh`` are eligible
+       (``current_submap_id`` is the newest built submap; the ``sub_map_thresh``
+       newest are skipped).
+    2. Keep those whose centre is nearer than :func:`search_radius` to the
+       scan's position; or, given ``covariances`` ((E, 3, 3), each eligible
+       centre's position relative to the scan, m²), those in reach of
+       :func:`helpers.uncertainty.mahalanobis_gate` (``search_sigmas``).
+    3. Sort them by distance; if the nearest is among the submap ids
+       ``closed`` (a loop has just closed there), stop. Otherwise register the
+       scan to at most ``max_attempts`` of them, from ``scan_pose``.
+    4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
+       ``max_returned``, lowest RMSE first.
+
+    The names in quotes are the fields of ``settings``.
+    """
+    centres = np.asarray(submap_centres, dtype=float).reshape(-1, 3)
+    scan_points = check_points(scan_points, "the current scan")
+    scan_pose = check_pose(scan_pose, "the current scan pose")
+    _check_search(submaps, centres, current_submap_id)
+    max_attempts = settings.max_attempts
+
+    # 1.-2. eligible submaps within the (growing) radius, nearest first
+    position = scan_pose[:3, 3]
+    eligible = centres[: eligible_submaps(current_submap_id + 1, settings)]
+    distance = np.linalg.norm(eligible - position, axis=1)
+    radius = reach_of_submaps(centres[: current_submap_id + 1], position, len(eligible), settings, covariances)
+    near = np.flatnonzero(distance < radius[: len(eligible)])
+    near = near[np.argsort(distance[near], kind="stable")]
+    if len(near) and int(near[0]) in closed:
+        return LoopCandidates(*_NONE, n_eligible=len(eligible), radius=radius, closed=True)
+
+    # 3. verify the nearest few by ICP
+    found, tried = [], []
+    for submap_id in near[:max_attempts]:
+        pose, rmse = icp_fn(
+            moving=scan_points,
+            fixed=submaps[submap_id],
+            T_fixed_moving=scan_pose,
+            max_iterations=settings.icp_max_iterations,
+        )
+        log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        tried.append(rmse)
+        if rmse < settings.loop_closure_threshold:
+            found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
+
+    # 4. best first
+    found.sort(key=lambda item: item[0])
+    found = found[: settings.max_returned]
+    return LoopCandidates(
+        np.array([f[1] for f in found], dtype=int),
+        np.array([f[0] for f in found], dtype=float),
+        np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
+        n_eligible=len(eligible),
+        radius=radius,
+        tried_ids=near[:max_attempts].astype(int),
+        tried=np.array(tried, dtype=float),
+    )
+
+
+_NONE = (np.zeros(0, dtype=int), np.zeros(0), np.zeros((0, 4, 4)))
+
+
+def _check_search(submaps, centres, current_submap_id) -> None:
+    if not np.all(np.isfinite(centres)):
+        raise SlamError("the submap centres contain NaN or infinite values")
+    if not 0 <= current_submap_id < min(len(centres), len(submaps)):
+        raise SlamError(
+            f"current_submap_id {current_submap_id} is not among the {min(len(centres), len(submaps))} submaps given"
+        )

@@ -1,0 +1,179 @@
+"""The loop search's uncertainty: the relative covariance of a chain against
+its analytic sum, what a loop edge does to it, and the Mahalanobis gate."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from helpers.config import PoseGraphConfig
+from helpers.errors import SlamError
+from helpers.factors import Edge
+from helpers.uncertainty import RelativeUncertainty, adjoint, edge_information, mahalanobis_gate
+
+SIGMA_M = 0.1
+
+
+def step(x=6.0, yaw_deg=0.0, pitch_deg=0.0) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = Rotation.from_euler("zy", [yaw_deg, pitch_deg], degrees=True).as_matrix()
+    T[:3, 3] = [x, 0.0, 0.0]
+    return T
+
+
+def chain(steps, settings, refresh_nodes=12):
+    graph = RelativeUncertainty(settings, refresh_nodes=refresh_nodes)
+    pose = np.eye(4)
+    graph.add_node(pose)
+    poses = [pose]
+    for s in steps:
+        pose = pose @ s
+        graph.add_node(pose)
+        poses.append(pose)
+    return graph, np.array(poses)
+
+
+def test_a_straight_chain_adds_its_step_variances():
+    # Rotations held (almost) exactly: the position of node c relative to node n is off by n - c independent steps.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=1e-6)
+    graph, _ = chain([step()] * 30, settings)
+    cov = graph.position_covariances([0, 10, 29])
+    for c, covariance in zip([0, 10, 29], cov, strict=True):
+        np.testing.assert_allclose(covariance, (30 - c) * SIGMA_M**2 * np.eye(3), rtol=1e-5, atol=1e-9)
+
+
+def analytic_position_covariance(poses, c, step_covariance):
+    """Node c's position relative to the last node: the sum over the steps between them of each
+    step's noise carried to node c by the adjoint (GTSAM's right perturbation, rotation first)."""
+    n = len(poses) - 1
+    total = np.zeros((6, 6))
+    for k in range(c + 1, n + 1):  # step k joins node k - 1 to node k; its noise sits in node k's frame
+        A = adjoint(np.linalg.inv(poses[c]) @ poses[k])
+        total += A @ step_covariance @ A.T
+    R = poses[c][:3, :3]
+    return R @ total[3:, 3:] @ R.T
+
+
+@pytest.mark.parametrize("refresh_nodes", [1, 5, 100])
+def test_a_turning_3d_chain_matches_the_analytic_sum(refresh_nodes):
+    # Rotation noise makes the old place's position uncertain across the track, the more the farther:
+    # the tracker must give the analytic compounding, whether it recomputes or reuses between nodes.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    steps = [step(6.0, yaw_deg=3.0, pitch_deg=0.5 * (-1) ** k) for k in range(20)]
+    graph, poses = chain(steps[:8], settings, refresh_nodes)
+    graph.position_covariances([0])  # computed here, then reused as the chain grows
+    for k in range(8, 20):
+        graph.add_node(poses[-1] @ steps[k])
+        poses = np.concatenate([poses, [poses[-1] @ steps[k]]])
+    q = np.diag(np.r_[np.full(3, np.radians(0.3)), np.full(3, SIGMA_M)] ** 2)  # rotation first
+    cov = graph.position_covariances([0, 7, 15])
+    for c, covariance in zip([0, 7, 15], cov, strict=True):
+        np.testing.assert_allclose(covariance, analytic_position_covariance(poses, c, q), rtol=1e-5, atol=1e-9)
+    lateral = cov[0][1, 1]  # across the track the rotation noise dominates over the 20 steps' translation
+    assert lateral > 5 * 20 * SIGMA_M**2
+
+
+def test_a_loop_edge_shrinks_the_covariance_as_two_parallel_measurements():
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=1e-6)
+    graph, poses = chain([step()] * 40, settings)
+    before = graph.position_covariances([0])[0]
+    graph.add_edge(Edge(0, 40, np.linalg.inv(poses[0]) @ poses[40]), loop=True)  # a loop edge: one step's sigma
+    after = graph.position_covariances([0, 20])
+    expected = 1.0 / (1.0 / (40 * SIGMA_M**2) + 1.0 / SIGMA_M**2)  # the chain and the loop, in parallel
+    np.testing.assert_allclose(before, 40 * SIGMA_M**2 * np.eye(3), rtol=1e-5, atol=1e-9)
+    np.testing.assert_allclose(after[0], expected * np.eye(3), rtol=1e-5, atol=1e-9)
+    # Node 20 lies halfway round the closed loop: two chains of 20 and 21 steps (one of them the loop edge).
+    middle = 1.0 / (1.0 / (20 * SIGMA_M**2) + 1.0 / (21 * SIGMA_M**2))
+    np.testing.assert_allclose(after[1], middle * np.eye(3), rtol=1e-5, atol=1e-9)
+
+
+def test_edges_back_take_the_sigmas_times_their_span_or_their_own_information():
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    back = Edge(3, 7, np.eye(4))
+    np.testing.assert_allclose(np.diag(edge_information(back, settings)), (4 * settings.edge_sigmas) ** -2.0)
+    np.testing.assert_allclose(np.diag(edge_information(back, settings, loop=True)), settings.edge_sigmas**-2.0)
+    np.testing.assert_allclose(edge_information(back, PoseGraphConfig(graph_weights="identity")), np.eye(6))
+    own = np.diag([4.0, 1.0, 9.0, 100.0, 100.0, 100.0])
+    measured = Edge(3, 7, np.eye(4))
+    object.__setattr__(measured, "information", own)  # as the registration will hand it over
+    np.testing.assert_allclose(edge_information(measured, settings), own)
+
+
+def test_the_gate_keeps_a_true_revisit_and_refuses_a_far_place():
+    radius, sigmas = 7.9, 3.0
+    here = np.array([0.0, 0.0, 700.0])
+    drift = np.diag([4.0, 1.0, 0.25])  # 2 m along x, 1 m along y, 0.5 m in height
+    centres = here + np.array(
+        [
+            [5.0, 0.0, 0.0],  # within the fixed radius: a revisit whatever the uncertainty
+            [7.9 + 5.0, 0.0, 0.0],  # 5 m beyond it along x: 2.5 sigmas, in reach
+            [0.0, 7.9 + 5.0, 0.0],  # 5 m beyond it along y: 5 sigmas, out of reach
+            [100.0, 0.0, 0.0],  # far away
+        ]
+    )
+    reach, radii = mahalanobis_gate(centres, here, np.repeat(drift[None], 4, 0), radius, sigmas)
+    assert reach.tolist() == [True, True, False, False]
+    np.testing.assert_allclose(radii, [radius + 6.0, radius + 6.0, radius + 3.0, radius + 6.0])
+    reach, radii = mahalanobis_gate(centres, here, np.zeros((4, 3, 3)), radius, sigmas)  # no uncertainty
+    assert reach.tolist() == [True, False, False, False]
+    np.testing.assert_allclose(radii, radius, atol=1e-5)
+
+
+def test_bad_nodes_and_edges_raise_slam_error():
+    graph, _ = chain([step()] * 3, PoseGraphConfig())
+    with pytest.raises(SlamError):
+        graph.position_covariances([4])
+    with pytest.raises(SlamError):
+        graph.add_edge(Edge(0, 5, np.eye(4)))
+    with pytest.raises(SlamError):
+        graph.add_node(np.eye(4), Edge(0, 4, np.eye(4)))
+
+
+class AlwaysMatches:
+    """ICP that finds every old place where the odometry puts it (RMSE 0.1 m, well pinned), counting its calls."""
+
+    def __init__(self):
+        self.calls = 0
+
+    def __call__(self, *, moving, fixed, T_fixed_moving, max_iterations=None):
+        self.calls += 1
+        return T_fixed_moving, 0.1
+
+    def constraint(self, **_):
+        return 1.0
+
+
+def hairpin(closer, n_out=30):
+    """Out along x in 6 m steps, then back over the same line: every node on the way back is a revisit.
+    Returns the nodes that closed a loop and how many queries registered anything."""
+    xs = np.r_[6.0 * np.arange(n_out), 6.0 * np.arange(n_out - 1, -1, -1) + 1.0]
+    poses, clouds, closed, queried = [], [], [], 0
+    for node, x in enumerate(xs):
+        poses.append(step(x))
+        clouds.append(np.zeros((4, 3)))
+        query = closer.add(node, clouds[-1], poses[-1], clouds, np.array(poses))
+        queried += query is not None
+        if query is not None and query.closure is not None:
+            closed.append(node)
+    return closed, queried
+
+
+@pytest.mark.parametrize("search", ["uncertainty", "growth"])
+def test_after_a_loop_the_same_place_waits_skip_after_loop_scans(search):
+    from helpers.config import Config
+    from helpers.loopclosure import LoopCloser
+
+    def run(skip):
+        settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "search": search, "skip_after_loop": skip})
+        icp = AlwaysMatches()
+        closer = LoopCloser(settings.loop_closure, settings.map, icp, settings.pose_graph)
+        closed, queried = hairpin(closer)
+        return closed, queried, icp.calls, closer.skipped
+
+    every, queried, calls, skipped = run(0)
+    assert skipped == 0 and len(every) == queried > 20  # every revisiting node queries and closes
+    waited, _, calls_6, skipped_6 = run(6)
+    assert set(waited) <= set(every) and skipped_6 > 0 and calls_6 < calls / 4
+    # The loops that matter stay: the first revisit closes as before, and no stretch of the way back
+    # goes longer than the window without a loop edge.
+    assert waited[0] == every[0]
+    assert np.diff(waited).max() <= 7 and every[-1] - waited[-1] <= 7
