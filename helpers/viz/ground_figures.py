@@ -14,19 +14,29 @@ from .style import COLORS, grid, xy_of
 STAGE_COLORS = (COLORS["odometry"], COLORS["optimized"], "#9467bd", "#8c564b", "#e377c2")
 
 
-def runs_figure(ground_truth, runs: dict, title="trajectories from above"):
+def runs_figure(ground_truth, runs: dict, title="trajectories from above", inset=None, inset_at=(0.45, 0.3, 0.5, 0.4)):
     """Top view of the truth (green, with its start) and of each run in ``runs``
-    (label -> (K, 4, 4) poses), one colour each, in the order of :data:`STAGE_COLORS`."""
+    (label -> (K, 4, 4) poses), one colour each, in the order of :data:`STAGE_COLORS`;
+    ``inset`` = (xmin, xmax, ymin, ymax) zooms, drawn at ``inset_at`` (axes fractions)."""
     gt = xy_of(ground_truth)
     fig, ax = plt.subplots(figsize=(8, 6), constrained_layout=True)
-    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=4, label="ground truth")
+
+    def draw(axis):
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=4, label="ground truth")
+        for (label, poses), color in zip(runs.items(), STAGE_COLORS, strict=False):
+            xy = xy_of(poses)
+            axis.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
+
+    draw(ax)
     ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
-    for (label, poses), color in zip(runs.items(), STAGE_COLORS, strict=False):
-        xy = xy_of(poses)
-        ax.plot(xy[:, 0], xy[:, 1], color=color, lw=1.6, label=label)
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
-    ax.legend(fontsize=9, loc="best")
+    ax.legend(fontsize=9, loc="upper left")
+    if inset is not None:
+        zoom = ax.inset_axes(list(inset_at))
+        draw(zoom)
+        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
+        ax.indicate_inset_zoom(zoom, edgecolor="black")
     return fig
 
 
