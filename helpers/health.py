@@ -48,8 +48,8 @@ MAX_CORRECTION_SHARE = 0.01  # loops moving a pose by more than this share of th
 # (on good odometry the loops move the trajectory by a fraction of this; beyond it the trajectory stays off the
 # truth between the places where loops closed)
 WEAK_CONSTRAINT = 0.005  # below this ICP cannot tell a slide along the ground (a good step lies well above it)
-WEAK_SIGMA_M = 0.25  # m: a step's weakest direction this loose was not pinned (benchmarks/bench_information.py
-# prints the calibrated sigmas: good steps lie well below it, on flat ground they reach metres)
+WEAK_SIGMA_M = 0.5  # m: a step whose weakest direction is this loose was not pinned (the calibrated sigmas of
+# good steps lie well below it, benchmarks/bench_information.py; on flat ground they reach metres)
 CORRECTION_FLOOR_M = 0.35  # m: loops moving no pose by more than this leave less drift than issue 21 asks of a
 # run at all (0.35 m on the 700 m scenes), whatever the distance flown
 

@@ -148,3 +148,28 @@ def test_hessian_weights_believe_the_edge_that_is_sure(weights, expected):
     config = Config().with_values(pose_graph={"graph_weights": weights})
     result = build_pose_graph(odometry, extra, [], config).optimize(anchor_pose=np.eye(4), loop_kernel="none")
     assert result.poses[2][0, 3] == pytest.approx(expected, abs=0.01)
+
+
+def test_the_icp_service_hands_out_calibrated_information():
+    """What the run's ICP service returns is the raw information scaled and floored by [pose_graph]."""
+    from helpers.icp_service import IcpService
+
+    config = Config().with_values(pose_graph={"information_scale": 0.2, "min_sigma_m": 0.01, "min_sigma_deg": 0.02})
+    run = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
+    assert run.information_scale == 0.2 and np.array_equal(run.min_sigmas, config.pose_graph.min_sigmas)
+    service = IcpService(
+        metric="plane-to-plane",
+        inlier_distance=ICP["inlier_distance"],
+        tolerance=ICP["tolerance"],
+        backend="small_gicp",
+        information_scale=run.information_scale,
+        min_sigmas=run.min_sigmas,
+    )
+    fixed = _hills(seed=12)
+    moving = transform_points(_hills(seed=13), np.linalg.inv(_transform(1.0, [0.4, 0.1, 0.0])))
+    raw = refine_icp(moving, fixed, np.eye(4), metric="plane-to-plane", backend="small_gicp", **ICP)
+    fit = service.align(moving=moving, fixed=fixed, T_fixed_moving=np.eye(4), max_iterations=ICP["max_iterations"])
+    assert np.allclose(fit.T_fixed_moving, raw.T_fixed_moving)
+    assert np.allclose(fit.information, calibrated(raw.information, 0.2, run.min_sigmas))
+    sigmas = np.sqrt(np.diag(np.linalg.inv(fit.information)))
+    assert sigmas[:3].min() >= 0.01 and np.degrees(sigmas[3:]).min() >= 0.02
