@@ -10,7 +10,9 @@ only, with the constant-velocity factor, with GNSS fixes of the given sigma
 (simulated from the true positions, seeded), and with both. ``--swing``
 resamples the waypoints so that their spacing, the drone's speed, swings by
 this share around the flight's own (a sine over ``SWING_PERIOD`` m of track).
-Prints ATE (m, optimised) per variant and the pose graph's time.
+Prints ATE (m, optimised) per variant and the pose graph's time. ``--edges M,DEG``
+adds lidar only and GNSS with other fixed edge sigmas (how much the fixes'
+effect depends on how sure the edges say they are).
 """
 
 from __future__ import annotations
@@ -76,6 +78,9 @@ def main() -> None:
     parser.add_argument("--scans", type=int, default=None, help="the first N scans only (default: all)")
     parser.add_argument("--swing", type=float, default=0.0, help="speed swing, a share (0.3: +-30 %%)")
     parser.add_argument("--gnss-sigma", type=float, default=2.0, help="m, horizontal and vertical")
+    parser.add_argument(
+        "--edges", help="M,DEG: also lidar only and GNSS with these [pose_graph] edge sigmas (m and deg per step)"
+    )
     args = parser.parse_args()
     for name in args.flights:
         data, config = flight(name, args.scans, args.swing)
@@ -96,13 +101,21 @@ def main() -> None:
             f"step {steps.min():.2f}-{steps.max():.2f} m, {len(slam.loops.loops)} loops, "
             f"ATE odometry {ate(odometry.poses, truth).rmse:.3f} m; registered in {registered:.0f} s"
         )
-        for label, motion, use_gnss in [
-            ("lidar only", False, False),
-            ("motion factor", True, False),
-            (f"GNSS {args.gnss_sigma:g} m", False, True),
-            (f"GNSS {args.gnss_sigma:g} m + motion", True, True),
-        ]:
-            table = dataclasses.replace(config.pose_graph, motion_factor=motion)
+        variants = [
+            ("lidar only", False, False, {}),
+            ("motion factor", True, False, {}),
+            (f"GNSS {args.gnss_sigma:g} m", False, True, {}),
+            (f"GNSS {args.gnss_sigma:g} m + motion", True, True, {}),
+        ]
+        if args.edges:
+            metres, degrees = (float(v) for v in args.edges.split(","))
+            edges = {"edge_sigma_m": metres, "edge_sigma_deg": degrees}
+            variants += [
+                (f"lidar, edges {args.edges}", False, False, edges),
+                (f"GNSS, edges {args.edges}", False, True, edges),
+            ]
+        for label, motion, use_gnss, edges in variants:
+            table = dataclasses.replace(config.pose_graph, motion_factor=motion, **edges)
             variant = dataclasses.replace(config, pose_graph=table)
             start = time.perf_counter()
             graph = build_pose_graph(odometry, slam.edges_back.sorted(), slam.loops.loops, variant)
@@ -111,7 +124,7 @@ def main() -> None:
             result = graph.optimize(anchor_pose=slam.anchor, loop_kernel=table.loop_kernel)
             error = ate(result.poses, truth)
             print(
-                f"  {label:24s} ATE {error.rmse:.3f} m (max {error.max:.3f}); pose graph "
+                f"  {label:28s} ATE {error.rmse:.3f} m (max {error.max:.3f}); pose graph "
                 f"{time.perf_counter() - start:.2f} s, {result.iterations} iterations (busy machine)"
             )
 

@@ -335,7 +335,7 @@ class Config:
 REFERENCE_WORKFLOW = {
     "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
     "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth"},
-    "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none", "motion_factor": False},
+    "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order
 

@@ -201,14 +201,15 @@ def _constant_velocity_error(factor, values, jacobians) -> np.ndarray:
     """GTSAM's callback for :class:`ConstantVelocityFactor`: the error (rotation first) and, when asked
     for, its Jacobians with respect to the three poses, chained from GTSAM's own (``between``, ``Logmap``)."""
     a, b, c = (values.atPose3(key) for key in factor.keys())
+    if jacobians is None:  # the optimiser asks for the error alone far more often than for a linearisation
+        return gtsam.Pose3.Logmap(a.between(b).between(b.between(c)))
     d_a, d_b1, d_b2, d_c, d_first, d_second, d_log = (np.zeros((6, 6), order="F") for _ in range(7))
     first = a.between(b, d_a, d_b1)  # T_i_j
     second = b.between(c, d_b2, d_c)  # T_j_k
     error = gtsam.Pose3.Logmap(first.between(second, d_first, d_second), d_log)
-    if jacobians is not None:
-        jacobians[0] = d_log @ d_first @ d_a
-        jacobians[1] = d_log @ (d_first @ d_b1 + d_second @ d_b2)
-        jacobians[2] = d_log @ d_second @ d_c
+    jacobians[0] = d_log @ d_first @ d_a
+    jacobians[1] = d_log @ (d_first @ d_b1 + d_second @ d_b2)
+    jacobians[2] = d_log @ d_second @ d_c
     return error
 
 

@@ -44,6 +44,14 @@ class GnssFixes:
     positions: np.ndarray
     sigmas: np.ndarray
 
+    def __post_init__(self):
+        sigmas = np.asarray(self.sigmas, dtype=float)
+        if sigmas.shape != (3,) or not (np.all(np.isfinite(sigmas)) and np.all(sigmas > 0)):
+            raise SlamError(f"GNSS sigmas must be 3 positive numbers of metres (x y z), got {self.sigmas}")
+        positions = np.asarray(self.positions, dtype=float)
+        if positions.shape != (len(self.indices), 3) or not np.all(np.isfinite(positions)):
+            raise SlamError(f"GNSS positions must be {len(self.indices)} x 3 finite numbers, one row per index")
+
     def check_flight(self, n_scans: int, source: str = "the GNSS file") -> None:
         """Refuse fixes of scans the flight does not have."""
         outside = self.indices[(self.indices < 0) | (self.indices >= n_scans)]

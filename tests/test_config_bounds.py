@@ -15,8 +15,9 @@ from helpers.__main__ import main
 from helpers.config import STAGE_TABLES, Config, SensorConfig
 from helpers.configfile import config_from_dict, load_config
 from helpers.errors import SlamError
+from helpers.factors import constant_velocity_sigmas
 from helpers.fitting import Flight, fit_to_flight
-from helpers.limits import MAX_RAYS_PER_SCAN, angle_count
+from helpers.limits import MAX_LENGTH, MAX_RAYS_PER_SCAN, angle_count
 from helpers.posegraph import information_from_sigmas
 
 # The cases of the issue: each was accepted and then aborted a run, or gave NaN and inf with exit 0.
@@ -83,6 +84,10 @@ def _computable(config: Config) -> None:
     graph = config.pose_graph
     for steps in (1, graph.edges_back):
         assert np.isfinite(information_from_sigmas(graph.edge_sigmas * steps)).all()
+    for step in (1e-3, MAX_LENGTH):  # the motion factor's sigmas, between nodes from 1 mm to 1 km apart
+        angular = math.radians(graph.motion_angular_acceleration)
+        sigmas = constant_velocity_sigmas(step, graph.motion_speed, graph.motion_acceleration, angular)
+        assert np.isfinite(information_from_sigmas(sigmas)).all()
     loops = config.loop_closure
     assert loops.sub_map_thresh >= 1
     flown = 1e6 * 1e3  # a flight of the most scans, a kilometre apart
