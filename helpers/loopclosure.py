@@ -45,7 +45,7 @@ from .loopsearch import (
     search_radius,
 )
 from .submaps import SubmapIndex, centre_scan_id, scan_ids_of
-from .uncertainty import RelativeUncertainty
+from .uncertainty import RelativeUncertainty, mahalanobis_gate
 
 log = logging.getLogger(__name__)
 
@@ -151,20 +151,20 @@ class LoopCloser:
         loop edge if :meth:`accepts` it. None if no submap was registered."""
         submaps, settings = self.submaps, self.settings
         # 1. Old submaps within the search radius (grown, or from the graph's uncertainty), verified by ICP.
-        covariances = None
+        covariances, centres, extents = None, submaps.centres, None
         self._follow(node, poses)
         if self.uncertainty is not None:
-            n, eligible = submaps.n_scans_per_submap, eligible_submaps(len(submaps), settings)
-            covariances = self.uncertainty.position_covariances([centre_scan_id(k, n) for k in range(eligible)])
+            covariances, centres, extents = self._uncertain_centres(pose[:3, 3], poses)
         candidates = find_loop_candidates(
             submaps.points,
-            submaps.centres,
+            centres,
             cloud,
             pose,
             len(submaps) - 1,
             self.icp,
             settings,
             covariances=covariances,
+            extents=extents,
             closed=closed_places(self.loops, node, settings.skip_after_loop, submaps.n_scans_per_submap),
         )
         if candidates.closed:
@@ -197,6 +197,28 @@ class LoopCloser:
             closure=closure,
             best_scan_constraint=pinned,
         )
+
+    def _uncertain_centres(self, position: np.ndarray, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For the gate, from the scan at ``position``: each eligible submap's
+        centre covariance (exact where the gate may let it in, carried over
+        elsewhere); every submap's centre, the eligible ones where the graph
+        puts them (the odometry's, moved by the loop edges found); and each
+        eligible submap's extent beyond the fixed radius, how far its scans lie
+        from its centre (a scan over any of them overlaps it)."""
+        settings, n = self.settings, self.submaps.n_scans_per_submap
+        count = eligible_submaps(len(self.submaps), settings)
+        nodes = [centre_scan_id(k, n) for k in range(count)]
+        scans = np.asarray(poses, dtype=float)[: count * n, :3, 3].reshape(count, n, 3)
+        extents = np.linalg.norm(scans - scans[:, [n - 1 - n // 2]], axis=2).max(axis=1)
+        radius, sigmas = settings.loop_closure_search_radius + extents, settings.search_sigmas
+
+        def wanted(covariances):
+            return mahalanobis_gate(self.uncertainty.positions(nodes), position, covariances, radius, sigmas)[0]
+
+        covariances = self.uncertainty.position_covariances(nodes, wanted=wanted)
+        centres = self.submaps.centres
+        centres[:count] = self.uncertainty.positions(nodes)
+        return covariances, centres, extents
 
     def accepts(self, rmse: float, constraint: float) -> bool:
         """A best scan match is a loop edge if it fits (surface RMSE below

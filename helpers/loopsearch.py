@@ -74,21 +74,29 @@ def distance_flown_since(submap_centres: np.ndarray, position: np.ndarray) -> np
 
 
 def reach_of_submaps(
-    centres: np.ndarray, position: np.ndarray, n_eligible: int, settings: LoopClosureConfig, covariances=None
+    centres: np.ndarray,
+    position: np.ndarray,
+    n_eligible: int,
+    settings: LoopClosureConfig,
+    covariances=None,
+    extents=None,
 ) -> np.ndarray:
     """The search radius (m) around each of the submaps whose ``centres`` are
     given, for a scan at ``position``: :func:`search_radius` (growth), or,
     given ``covariances`` ((n_eligible, 3, 3): each eligible centre's position
     relative to the scan, m²), the gate's radius along the way to each
-    eligible centre (the newest submaps, never searched, keep the fixed radius)."""
+    eligible centre; the place's extent is the fixed radius plus ``extents``
+    ((n_eligible,) m, how far the submap's scans lie from its centre; 0 when
+    not given). The newest submaps, never searched, keep the fixed radius."""
     if covariances is None:
         return search_radius(centres, position, settings)
     covariances = np.asarray(covariances, dtype=float).reshape(-1, 3, 3)
-    if len(covariances) != n_eligible:
-        raise SlamError(f"{len(covariances)} covariances given for {n_eligible} eligible submaps")
+    extents = np.zeros(n_eligible) if extents is None else np.asarray(extents, dtype=float).ravel()
+    if len(covariances) != n_eligible or len(extents) != n_eligible:
+        raise SlamError(f"{len(covariances)} covariances and {len(extents)} extents for {n_eligible} eligible submaps")
     radius = np.full(len(centres), settings.loop_closure_search_radius)
     _, radius[:n_eligible] = mahalanobis_gate(
-        centres[:n_eligible], position, covariances, settings.loop_closure_search_radius, settings.search_sigmas
+        centres[:n_eligible], position, covariances, radius[:n_eligible] + extents, settings.search_sigmas
     )
     return radius
 
@@ -118,6 +126,7 @@ def find_loop_candidates(
     settings: LoopClosureConfig,
     covariances: np.ndarray | None = None,
     closed=(),
+    extents: np.ndarray | None = None,
 ) -> LoopCandidates:
     """Old submaps that the current scan registers onto, as the reference helper does.
 
@@ -127,7 +136,9 @@ def find_loop_candidates(
     2. Keep those whose centre is nearer than :func:`search_radius` to the
        scan's position; or, given ``covariances`` ((E, 3, 3), each eligible
        centre's position relative to the scan, m²), those in reach of
-       :func:`helpers.uncertainty.mahalanobis_gate` (``search_sigmas``).
+       :func:`helpers.uncertainty.mahalanobis_gate` (``search_sigmas``;
+       the place's extent: the fixed radius plus ``extents``, (E,) m; the
+       loop closer gives the centres where the graph puts them).
     3. Sort them by distance; if the nearest is among the submap ids
        ``closed`` (a loop has just closed there), stop. Otherwise register the
        scan to at most ``max_attempts`` of them, from ``scan_pose``.
@@ -146,7 +157,7 @@ def find_loop_candidates(
     position = scan_pose[:3, 3]
     eligible = centres[: eligible_submaps(current_submap_id + 1, settings)]
     distance = np.linalg.norm(eligible - position, axis=1)
-    radius = reach_of_submaps(centres[: current_submap_id + 1], position, len(eligible), settings, covariances)
+    radius = reach_of_submaps(centres[: current_submap_id + 1], position, len(eligible), settings, covariances, extents)
     near = np.flatnonzero(distance < radius[: len(eligible)])
     near = near[np.argsort(distance[near], kind="stable")]
     if len(near) and int(near[0]) in closed:

@@ -4,28 +4,36 @@ old place, and the loop search's gate built on it (issue 21, item 5).
 :class:`RelativeUncertainty` keeps the graph as the run grows it: one node
 per accepted scan at its odometry pose, the odometry steps, the edges back
 and the loop edges, each with its noise (:func:`edge_information`). It
-answers one question: the covariance of the current node's position relative
-to an old node ``c``. A loop query turns that into a gate
-(:func:`mahalanobis_gate`): an old submap is searched when its centre could,
-within ``search_sigmas`` sigmas, lie within the fixed search radius of the
-scan. With no uncertainty the gate is the reference's fixed radius; drift
-widens it only where the graph says drift can be, and a loop shrinks it.
+answers two questions: where the graph puts an old node ``c`` relative to the
+current one (the odometry's offset, moved by the loop edges found), and how
+uncertain that offset is (its covariance). A loop query turns them into a
+gate (:func:`mahalanobis_gate`): an old submap is searched when its centre
+could, within ``search_sigmas`` sigmas, lie within the fixed search radius
+of the scan. With no uncertainty the gate is the reference's fixed radius;
+drift widens it only where the graph says drift can be, and a loop shrinks
+it (and moves the old places to where the loop says they are: a narrow gate
+around the odometry's offset would miss them).
 
 The covariance, in GTSAM's conventions (a pose ``T = T_hat @ Exp(xi)``,
 ``xi`` rotation first): hold node ``m`` fixed (a stiff prior on it and on no
-other node) and the marginal covariance of node ``c`` (``gtsam.Marginals``)
-is the covariance of ``c`` relative to ``m``. Computing it is the costly part,
+other node), eliminate the graph linearised at the odometry poses once, and
+its solution moves every node where the graph puts it while the marginal
+covariance of node ``c`` (as ``gtsam.Marginals`` gives it) is the covariance
+of ``c`` relative to ``m``. Computing them is the costly part,
 so it is done at most once per query, anchored at the node that asks, and
 reused while it stays valid: for the next few nodes the chain of odometry
 steps since ``m`` is compounded (``Sigma <- Ad(S^-1) Sigma Ad(S^-1)^T + Q``)
 and added through the adjoint. A new loop edge makes it stale (loops are what
 shrink it); so does a chain grown to :data:`REFRESH_NODES` nodes. The chain
 leaves out the edges back among its nodes, so the reused answer errs on the
-wide side.
+wide side. Only the nodes a query may let in are computed anew; the others
+keep the answer carried over from the last computation, which edges added
+since can only have narrowed (a gate that refuses a node under the carried
+answer refuses it under the exact one).
 
 The graph is linearised at the odometry poses (they never change during a
-run). Loop edges enter it as plain Gaussians: a false loop would make the
-gate too narrow near it, never too wide.
+run). Loop edges enter it as plain Gaussians: a false loop would move the old
+places near it and narrow the gate around the wrong spot.
 """
 
 from __future__ import annotations
@@ -82,7 +90,7 @@ class RelativeUncertainty:
         graph.add_edge(edge)  # an edge back; graph.add_edge(loop, loop=True) for a loop edge
         cov = graph.position_covariances(old_nodes)  # (K, 3, 3), map frame, m²
 
-    ``seconds`` and ``refreshes`` say what the answers cost.
+    ``seconds``, ``refreshes`` and ``answers`` say what the answers cost.
     """
 
     def __init__(self, settings: PoseGraphConfig, refresh_nodes: int = REFRESH_NODES) -> None:
@@ -90,11 +98,14 @@ class RelativeUncertainty:
         self.graph = gtsam.NonlinearFactorGraph()
         self.values = gtsam.Values()
         self.poses: list[np.ndarray] = []
-        self.seconds, self.refreshes = 0.0, 0
+        self.seconds, self.refreshes, self.answers = 0.0, 0, 0  # time spent, eliminations, queries answered
         self._anchor: int | None = None  # the node the cached marginals are relative to
-        self._marginals = None
+        self._tree = None  # the graph held at the anchor, eliminated: its marginals and its solution
+        self._positions = np.zeros((0, 3))  # where the graph held at the anchor puts each node (map frame)
         self._cached: dict[int, np.ndarray] = {}  # node -> its 6 x 6 covariance relative to the anchor
+        self._exact: set[int] = set()  # the nodes whose cached covariance came from the anchor's marginals
         self._chain = np.zeros((6, 6))  # the current node relative to the anchor, along the odometry steps
+        self._due = False  # a loop edge came since the anchor's marginals
 
     @property
     def num_nodes(self) -> int:
@@ -116,10 +127,8 @@ class RelativeUncertainty:
                 f"the odometry step of node {node} must join nodes {node - 1} and {node}, got {step.i}-{step.j}"
             )
         information = self._add(step, loop=False)
-        if self._anchor is not None:  # compound the chain since the anchor by one step
-            back = adjoint(np.linalg.inv(relative))
-            covariance = np.linalg.inv(_rotation_first(information))
-            self._chain = back @ self._chain @ back.T + covariance
+        back = adjoint(np.linalg.inv(relative))  # compound the chain since the anchor by one step
+        self._chain = back @ self._chain @ back.T + np.linalg.inv(_rotation_first(information))
         return node
 
     def add_edge(self, edge: Edge, *, loop: bool = False) -> None:
@@ -128,30 +137,65 @@ class RelativeUncertainty:
             if not 0 <= k < self.num_nodes:
                 raise SlamError(f"edge {edge.i}-{edge.j}: node {k} is not in the graph ({self.num_nodes} nodes)")
         self._add(edge, loop=loop)
-        if loop:
-            self._anchor = None  # a loop changes every relative covariance: compute them again
+        self._due |= loop  # a loop shrinks the relative covariances: compute them again at the next query
 
-    def position_covariances(self, nodes) -> np.ndarray:
+    def position_covariances(self, nodes, wanted=None) -> np.ndarray:
         """(K, 3, 3) covariance (m², map frame) of where each of ``nodes`` lies
         relative to the current (newest) node: how far the odometry's offset
-        between them may be off."""
+        between them may be off.
+
+        ``wanted``: (K, 3, 3) covariances -> (K,) bool, the nodes whose answer
+        matters (the gate's candidates). Given it, a node left out keeps the
+        answer carried over from an earlier computation, wider than or equal
+        to the exact one (edges added since only shrink it), so a gate that
+        refuses it under that answer refuses it under the exact one too; only
+        the wanted nodes are computed anew (each costs a marginal)."""
         start = time.perf_counter()
         nodes = np.asarray(nodes, dtype=int).ravel()
         current = self.num_nodes - 1
         if nodes.size and not (0 <= nodes.min() and nodes.max() <= current):
             raise SlamError(f"nodes {nodes.min()} .. {nodes.max()} are not all in the graph ({self.num_nodes} nodes)")
-        stale = self._anchor is None or current - self._anchor >= self.refresh_nodes
+        stale = self._due or self._anchor is None or current - self._anchor >= self.refresh_nodes
         if stale or (nodes.size and nodes.max() > self._anchor):
             self._refresh(current)
-        relative = np.array([self._relative(int(c)) for c in nodes]).reshape(-1, 6, 6)
-        poses = np.array([self.poses[c] for c in nodes]).reshape(-1, 4, 4)
-        if self._anchor != current:  # the chain since the anchor, moved into each node's frame
-            spread = adjoint(np.linalg.inv(poses) @ self.poses[current])
-            relative = relative + spread @ self._chain @ np.swapaxes(spread, 1, 2)
-        rotation = poses[:, :3, :3]
-        covariance = rotation @ relative[:, 3:, 3:] @ np.swapaxes(rotation, 1, 2)
+        covariance = self._from_cache(nodes)
+        if wanted is not None:
+            redo = [k for k in np.flatnonzero(wanted(covariance)) if nodes[k] not in self._exact]
+        else:
+            redo = [k for k, c in enumerate(nodes) if c not in self._exact]
+        for k in redo:
+            self._cached[int(nodes[k])] = self._tree.marginalCovariance(int(nodes[k]))
+            self._exact.add(int(nodes[k]))
+        if redo:
+            covariance[redo] = self._from_cache(nodes[redo])
         self.seconds += time.perf_counter() - start
+        self.answers += 1
         return covariance
+
+    def positions(self, nodes) -> np.ndarray:
+        """(K, 3) where the graph puts each of ``nodes`` (map frame), held at
+        the anchor's odometry pose and so comparable with the current node's
+        odometry position: the odometry's positions moved by the loop edges
+        (call after :meth:`position_covariances`, which computes them)."""
+        return self._positions[np.asarray(nodes, dtype=int).ravel()]
+
+    def _from_cache(self, nodes: np.ndarray) -> np.ndarray:
+        """The position covariances of ``nodes`` relative to the current node, from the cached answers relative
+        to the anchor and the chain since it (a node never computed is computed now)."""
+        for c in nodes:
+            if int(c) not in self._cached:
+                self._cached[int(c)] = self._tree.marginalCovariance(int(c))
+                self._exact.add(int(c))
+        relative = np.array([self._cached[int(c)] for c in nodes]).reshape(-1, 6, 6)
+        relative = relative + self._spread(nodes)
+        rotation = np.array([self.poses[c][:3, :3] for c in nodes]).reshape(-1, 3, 3)
+        return rotation @ relative[:, 3:, 3:] @ np.swapaxes(rotation, 1, 2)
+
+    def _spread(self, nodes: np.ndarray) -> np.ndarray:
+        """(K, 6, 6): the chain since the anchor, moved into each node's frame."""
+        poses = np.array([self.poses[c] for c in nodes]).reshape(-1, 4, 4)
+        spread = adjoint(np.linalg.inv(poses) @ self.poses[-1])
+        return spread @ self._chain @ np.swapaxes(spread, 1, 2)
 
     def _add(self, edge: Edge, *, loop: bool) -> np.ndarray:
         information = edge_information(edge, self.settings, loop=loop)
@@ -159,23 +203,23 @@ class RelativeUncertainty:
         return information
 
     def _refresh(self, anchor: int) -> None:
-        """The marginals of the graph held at node ``anchor``."""
+        """The marginals of the graph held at node ``anchor``; every cached
+        answer is carried over to it (relative to the new anchor, through the
+        chain since the old one) until a query wants it anew."""
         graph = gtsam.NonlinearFactorGraph(self.graph)
         noise = gtsam.noiseModel.Isotropic.Sigma(6, ANCHOR_SIGMA)
         graph.add(gtsam.PriorFactorPose3(anchor, self.values.atPose3(anchor), noise))
         try:
-            self._marginals = gtsam.Marginals(graph, self.values)
+            self._tree = graph.linearize(self.values).eliminateMultifrontal()
+            moved = self.values.retract(self._tree.optimize())
         except RuntimeError as exc:  # an indeterminant system: some node joined by no edge
             raise SlamError(f"the loop search's graph cannot be solved: {exc}") from None
-        self._anchor, self._cached, self._chain = anchor, {}, np.zeros((6, 6))
+        self._positions = gtsam.utilities.extractPose3(moved)[:, 9:12]  # rows [R (9), t (3)], node by node
+        kept = np.array([c for c in self._cached if c < anchor], dtype=int)
+        carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
+        self._cached = dict(zip(kept.tolist(), carried, strict=True))
+        self._anchor, self._exact, self._chain, self._due = anchor, set(), np.zeros((6, 6)), False
         self.refreshes += 1
-
-    def _relative(self, node: int) -> np.ndarray:
-        if node == self._anchor:
-            return np.zeros((6, 6))
-        if node not in self._cached:
-            self._cached[node] = self._marginals.marginalCovariance(node)
-        return self._cached[node]
 
 
 def _rotation_first(information: np.ndarray) -> np.ndarray:
@@ -184,13 +228,13 @@ def _rotation_first(information: np.ndarray) -> np.ndarray:
 
 
 def mahalanobis_gate(
-    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius: float, sigmas: float
+    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius, sigmas: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """Which old places the scan at ``position`` may truly be over, and the
     search radius around each.
 
-    Place ``k`` (its centre, map frame) is in reach when the odometry's offset
-    to it, less the fixed ``radius`` (the place's extent), is within
+    Place ``k`` (its centre, map frame) is in reach when the offset to it,
+    less ``radius`` (the place's extent, m; one number or one per place), is within
     ``sigmas`` of its uncertainty: ``d' = d (1 - radius / |d|)`` and
     ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
     the direction ``u`` of the offset follows: ``radius + sigmas /
@@ -204,5 +248,5 @@ def mahalanobis_gate(
     floor = 1e-12 * np.eye(3)  # a node at the anchor has no uncertainty at all
     inverse = np.linalg.inv(covariances + floor)
     spread = 1.0 / np.sqrt(np.einsum("ki,kij,kj->k", direction, inverse, direction))
-    reach = radius + sigmas * spread
+    reach = np.asarray(radius, float) + sigmas * spread
     return distance < reach, reach

@@ -177,3 +177,70 @@ def test_after_a_loop_the_same_place_waits_skip_after_loop_scans(search):
     # goes longer than the window without a loop edge.
     assert waited[0] == every[0]
     assert np.diff(waited).max() <= 7 and every[-1] - waited[-1] <= 7
+
+
+def test_answers_carried_over_are_never_narrower_and_a_wanted_node_is_exact():
+    # A loop and more nodes after the first answers: a node no query wants keeps its carried answer,
+    # at least as wide as the exact one; a wanted node gets the exact one, as a graph computed afresh.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    steps = [step(6.0, yaw_deg=4.0) for _ in range(61)]  # the last query computes anew (every 5 nodes from 41)
+    graph, poses = chain(steps[:40], settings, refresh_nodes=5)
+    old = [0, 10, 20]
+    graph.position_covariances(old)
+    graph.add_edge(Edge(0, 40, np.linalg.inv(poses[0]) @ poses[40]), loop=True)
+    for s in steps[40:]:
+        poses = np.concatenate([poses, [poses[-1] @ s]])
+        graph.add_node(poses[-1])
+        graph.add_edge(Edge(len(poses) - 3, len(poses) - 1, np.linalg.inv(poses[-3]) @ poses[-1]))  # edges back
+        carried = graph.position_covariances(old, wanted=lambda c: np.zeros(len(c), bool))
+    fresh, _ = chain(steps[:40], settings)
+    fresh.add_edge(Edge(0, 40, np.linalg.inv(poses[0]) @ poses[40]), loop=True)
+    for k in range(41, 62):
+        fresh.add_node(poses[k])
+        fresh.add_edge(Edge(k - 2, k, np.linalg.inv(poses[k - 2]) @ poses[k]))
+    exact = fresh.position_covariances(old)
+    for wide, right in zip(carried, exact, strict=True):
+        assert np.linalg.eigvalsh(wide - right).min() > -1e-9 * np.trace(right)
+    assert np.trace(carried[0]) > 1.5 * np.trace(exact[0])  # the loop's shrinking was not carried over
+    wanted = graph.position_covariances(old, wanted=lambda c: np.array([True, False, True]))
+    np.testing.assert_allclose(wanted[[0, 2]], exact[[0, 2]], rtol=1e-6, atol=1e-12)
+    np.testing.assert_allclose(wanted[1], carried[1])
+
+
+def test_after_a_loop_the_graph_moves_the_old_places_by_the_weighted_measurements():
+    # The chain says node 0 lies 240 m behind node 40, a loop edge (one step's sigma) says 236 m: held at node 40,
+    # the graph puts node 0 at the inverse-variance mean, and node 20 shares the correction by its chain's share.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=1e-6)
+    graph, poses = chain([step()] * 40, settings)
+    graph.add_edge(Edge(0, 40, step(236.0)), loop=True)
+    graph.position_covariances([0, 20])
+    w_chain, w_loop = 1 / (40 * SIGMA_M**2), 1 / SIGMA_M**2
+    behind = (240.0 * w_chain + 236.0 * w_loop) / (w_chain + w_loop)
+    expected_0 = poses[40][:3, 3] - [behind, 0, 0]
+    expected_20 = poses[20][:3, 3] + [(240.0 - behind) * 20 / 40, 0, 0]
+    np.testing.assert_allclose(graph.positions([0, 20]), [expected_0, expected_20], atol=1e-6)
+
+
+@pytest.fixture(scope="module")
+def short_loop(tmp_path_factory):
+    """A 200 m loop over the default scene flown once and 30 m past its start (115 scans), as test_pipeline's."""
+    import helpers
+    from helpers.waypoints import loop_waypoints
+
+    path = tmp_path_factory.mktemp("loop") / "loop.csv"
+    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
+    return helpers.create_dataset(waypoints_path=path)
+
+
+def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
+    from helpers.config import Config
+    from helpers.evaluation import grade_loops, run_metrics
+    from helpers.pipeline import run_slam
+
+    config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty"})
+    result = run_slam(short_loop, config)
+    m = run_metrics(short_loop, result)
+    assert m["n_loop_closures"] >= 3 and m["n_false_loop_closures"] == 0
+    assert m["ate_rmse_optimized_m"] < 0.5 * m["ate_rmse_odometry_m"]
+    for loop in grade_loops(short_loop, result):
+        assert loop.error_m < 1.0 and loop.error_deg < 2.0
