@@ -1,7 +1,8 @@
 """Step-length bias per registration stage: how long the estimated step is against the true one.
 
     nice -n 10 .venv/bin/python benchmarks/bench_bias.py [--flights default-700 autzen-150 ...]
-        [--experiment stages|before|grid|icpgrid|surface|start|skip|metric|crop|epsilon|steep|rows] [--pairs N]
+        [--experiment stages|before|grid|icpgrid|surface|start|skip|metric|crop|epsilon|steep|rows|rowless]
+        [--pairs N]
 
 Each flight is a stretch of a loop; its parameters are fitted to it as ``run``
 fits them (:func:`helpers.fitting.fit_to_flight`). Consecutive accepted scans
@@ -31,7 +32,8 @@ the spacing of the ray rows); ``metric`` the ICP metric; ``epsilon`` thinner
 generalized-ICP planes (less weight on residuals along the surface);
 ``steep`` ICP without the points on steep surfaces; ``rows`` the same flight
 with another along-track ray spacing (the sensor's elevation step: does ICP
-lock onto the ray rows?).
+lock onto the ray rows?); ``rowless`` every fixed scan's ICP cloud resampled
+from the surface through its points, without ray rows to lock onto.
 """
 
 from __future__ import annotations
@@ -46,8 +48,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
 import open3d as o3d
-from scipy.interpolate import RegularGridInterpolator, griddata
+from scipy.interpolate import LinearNDInterpolator, RegularGridInterpolator, griddata
 from scipy.ndimage import gaussian_filter
+from scipy.spatial import Delaunay
 
 from helpers import SensorConfig, default_scene, read_waypoints
 from helpers.config import Config
@@ -78,7 +81,7 @@ FLIGHTS = {
 }
 EXPERIMENT_FLIGHTS = ("sparse-150", "autzen-150")
 EXPERIMENTS = ("stages", "before", "grid", "icpgrid", "surface", "start", "skip", "metric", "crop", "epsilon", "steep")
-EXPERIMENTS += ("rows",)
+EXPERIMENTS += ("rows", "rowless")
 
 
 def surface_of(scene: str, variant: str = "tile") -> tuple[HeightField, np.ndarray]:
@@ -167,10 +170,24 @@ def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own",
     return describe(Frame(points, None, icp_points, {}, ready), config)
 
 
-def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), epsilon=None, steep=None):
+def resampled(scan: Frame, config: Config) -> Frame:
+    """``scan`` as a fixed scan whose ICP cloud has no ray rows: the surface through its ICP points
+    (triangulated from above, linear in each triangle) sampled on the ICP grid."""
+    points = scan.icp_points
+    interpolate = LinearNDInterpolator(Delaunay(points[:, :2]), points[:, 2])
+    step, fit = config.registration.icp_grid_step, config.registration
+    (x0, y0), (x1, y1) = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+    x, y = np.meshgrid(np.arange(x0, x1, step), np.arange(y0, y1, step))
+    grid = np.column_stack([x.ravel(), y.ravel(), interpolate(x.ravel(), y.ravel())])
+    grid = grid[np.isfinite(grid[:, 2])]
+    return dataclasses.replace(scan, icp_points=grid, icp=icp_cloud(grid, fit.metric, fit.icp_backend))
+
+
+def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), epsilon=None, steep=None, rowless=False):
     """Relative transforms per stage, (pairs, 4, 4) each, and the true ones (``truth``). ``icp`` is the
     odometry's own registration (:func:`helpers.odometry.register_frames`, with the overlap crop when
-    ``[registration] overlap_crop`` is on); ``icp<truth`` and ``icp<identity`` the same ICP from those starts."""
+    ``[registration] overlap_crop`` is on); ``icp<truth`` and ``icp<identity`` the same ICP from those starts.
+    ``rowless``: every fixed scan's ICP cloud :func:`resampled` without its ray rows."""
     indices = np.arange(0, len(data.poses), config.registration.skip_frames)
     out = {"truth": [], "coarse": []} | {f"icp<{s}" if s != "coarse" else "icp": [] for s in starts}
     previous = None
@@ -185,7 +202,7 @@ def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), epsil
             for start in starts[1:]:
                 init = {"truth": truth, "identity": np.eye(4)}[start]
                 out[f"icp<{start}"].append(track_frames(current, previous, config, init)[0].T_fine)
-        previous = current
+        previous = resampled(current, config) if rowless else current
     return {stage: np.array(transforms) for stage, transforms in out.items()}
 
 
@@ -282,6 +299,9 @@ def main() -> None:
         elif args.experiment == "before":
             report(f"{name} before (no crop)", measure(data, uncropped(config)))
             report(f"{name} as shipped", measure(data, config))
+        elif args.experiment == "rowless":
+            report(f"{name} as shipped", measure(data, config))
+            report(f"{name} fixed scans rowless", measure(data, config, rowless=True))
         elif args.experiment == "grid":
             for grid in ("own", "world", "fine", "raw"):
                 report(f"{name} grid {grid}", measure(data, config, grid))

@@ -17,6 +17,12 @@ start ``T_fixed_moving`` places it inside that outline shrunk by a margin
 point it does not belong to). The outline is the fixed scan's whatever the
 scans' headings, so a turn, a hover or a yaw of 90 degrees between the two
 crops along whichever edges they share, not along one direction of flight.
+
+The odometry crops at the answer of a first ICP on the whole scan and
+refines once more (:mod:`helpers.frames`), so a start far off cannot cut the
+overlap away. The edges back register whole scans: cropped, they left the
+default flight's map worse and their step lengths no truer (the ray rows pull
+those longer steps more than the leading edge does; ``benchmarks/bench_bias.py``).
 """
 
 from __future__ import annotations
@@ -24,8 +30,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
-from .icp import IcpCloud, IcpResult, icp_cloud
-from .icp_service import surface_rmse
+from .icp import IcpCloud, icp_cloud
 
 MIN_KEPT = 30  # points: a crop that keeps fewer leaves ICP too little to fit six degrees of freedom; keep all then
 
@@ -78,20 +83,3 @@ def cropped_cloud(moving: IcpCloud, fixed: np.ndarray, T_fixed_moving: np.ndarra
     if points is moving.points:
         return moving
     return icp_cloud(points, moving.metric, moving.backend)
-
-
-def register_overlap(icp, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, max_iterations=None):
-    """Register ``moving`` onto ``fixed`` as calling ``icp`` (a :class:`helpers.icp_service.IcpService`) does,
-    ``(T_fixed_moving, surface_rmse)``, with ICP on the moving points inside the fixed cloud's footprint (shrunk
-    by the service's inlier distance) at the start ``T_fixed_moving``; the score is measured on every point."""
-    points = crop(moving, fixed, T_fixed_moving, icp.inlier_distance)
-    if points is moving:
-        return icp(moving=moving, fixed=fixed, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
-    point_to_point = icp.metric == "point-to-point"
-    source = points if point_to_point else icp_cloud(points, icp.metric, icp.backend)
-    target = fixed if point_to_point else icp.ready(fixed)
-    fit = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
-    T = fit[0]  # an IcpResult carries the registration's information: keep it with the edge
-    return IcpResult(
-        T, surface_rmse(moving, icp.ready(fixed), T, icp.inlier_distance), getattr(fit, "information", None)
-    )

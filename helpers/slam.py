@@ -19,7 +19,6 @@ Accepted scans are the pose-graph nodes, numbered 0, 1, 2, ...;
 
 from __future__ import annotations
 
-import functools
 import logging
 import time
 from dataclasses import dataclass, field
@@ -35,7 +34,6 @@ from .geometry import check_points, check_pose
 from .icp_service import IcpService
 from .loopclosure import LoopCloser, LoopQuery
 from .odometry import Odometry, OdometryResult
-from .overlap import register_overlap
 from .posegraph import OptimizationResult, PoseGraph
 from .submaps import SubmapIndex, build_submap
 
@@ -112,9 +110,8 @@ class EdgesBack:
     cap gives the same trajectory sooner (notebook 6 and the benchmarks
     measure it)."""
 
-    def __init__(self, icp: IcpService, *, edges_back: int, max_iterations: int, rmse_threshold: float, crop=False):
+    def __init__(self, icp: IcpService, *, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
         self.icp, self.edges_back, self.max_iterations = icp, edges_back, max_iterations
-        self.register = functools.partial(register_overlap, icp) if crop else icp  # helpers.overlap says why
         self.rmse_threshold = rmse_threshold
         self.edges: list[Edge] = []
         self.tried = 0
@@ -124,7 +121,7 @@ class EdgesBack:
         kept = []
         for back in range(2, min(self.edges_back, j) + 1):
             guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
-            fit = self.register(
+            fit = self.icp(
                 moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
             )
             (T_i_j, rmse), self.tried = fit, self.tried + 1
@@ -166,7 +163,6 @@ class Slam:
             edges_back=graph.edges_back,
             max_iterations=graph.edges_back_icp_max_iterations,
             rmse_threshold=graph.edges_back_rmse_threshold,
-            crop=config.registration.overlap_crop,
         )
         self.clouds: list[np.ndarray] = []
         self.indices: list[int] = []
