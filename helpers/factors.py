@@ -55,9 +55,9 @@ class Edge:
     j: int
     relative: np.ndarray  # (4, 4) T_i_j
     surface_rmse: float = float("nan")  # m, of the registration that measured it (nan: not scored)
-    # 6 x 6, translation first, how sure the registration is (helpers.information; calibrated when the pose
-    # graph is built); None: the configured fixed sigmas
-    information: np.ndarray | None = field(default=None, repr=False, compare=False)
+    # 6 x 6, translation first, how sure the registration is (helpers.information, calibrated by the run's ICP
+    # service); None: the configured fixed sigmas. By keyword only, so records built on Edge keep their fields.
+    information: np.ndarray | None = field(default=None, repr=False, compare=False, kw_only=True)
 
     @property
     def rmse(self) -> float:

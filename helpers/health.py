@@ -9,10 +9,11 @@ A run is *not trusted* when
 - any step kept an ICP RMSE above ``[registration] icp_fallback_rmse`` (the
   chain may break there), or
 - more than :data:`MAX_FALLBACK_SHARE` of the steps were registered on ground
-  too flat to pin the motion along it (the sigma of the step's weakest
-  direction, from its calibrated information, above :data:`WEAK_SIGMA_M`;
-  without information, ICP's ``constraint`` below :data:`WEAK_CONSTRAINT`,
-  :func:`helpers.icp.pairing`), or
+  too flat to pin the motion along it: the sigma of the step's weakest
+  direction, from its calibrated information, above :data:`WEAK_SIGMA_M`, or
+  ICP's ``constraint`` below :data:`WEAK_CONSTRAINT` (:func:`helpers.icp.pairing`:
+  on a plane, generalized ICP's Hessian still counts the distances along the
+  plane its covariances allow, so both are read), or
 - a loop edge ends more than :data:`FALSE_LOOP_SIGMAS` from where the rest
   of the graph puts it, whitened by its own calibrated information (the
   graph's sigmas when it has none), and farther than a false loop is off
@@ -91,7 +92,7 @@ def assess(result) -> Health:
     fallbacks = [index for index, _ in odometry.fallbacks]
     poor = result.indices[1:][odometry.rmse > fit.icp_fallback_rmse]
     sigmas = weak_sigmas(odometry)
-    weak = result.indices[1:][np.where(np.isnan(sigmas), odometry.constraint < WEAK_CONSTRAINT, sigmas > WEAK_SIGMA_M)]
+    weak = result.indices[1:][(odometry.constraint < WEAK_CONSTRAINT) | (sigmas > WEAK_SIGMA_M)]
     positions = odometry.poses[:, :3, 3]
     flown_to = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     revisits, unclosed = _revisits(result, flown_to)

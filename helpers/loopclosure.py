@@ -259,5 +259,6 @@ def best_scan_registration(
             fit = icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init, max_iterations=cap)
             (T_i_j, rmse), information = fit, getattr(fit, "information", None)
             if best is None or rmse < best.surface_rmse:
-                best = Edge(i, int(current_id), check_pose(T_i_j, "the ICP result"), float(rmse), information)
+                T_i_j = check_pose(T_i_j, "the ICP result")
+                best = Edge(i, int(current_id), T_i_j, float(rmse), information=information)
     return best

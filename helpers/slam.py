@@ -126,7 +126,7 @@ class EdgesBack:
             )
             (T_i_j, rmse), self.tried = fit, self.tried + 1
             if rmse < self.rmse_threshold:
-                kept.append(Edge(j - back, j, T_i_j, rmse, fit.information))
+                kept.append(Edge(j - back, j, T_i_j, rmse, information=fit.information))
             else:
                 log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
         self.edges.extend(kept)

@@ -144,7 +144,7 @@ def test_hessian_weights_believe_the_edge_that_is_sure(weights, expected):
         timings={},
         information=[sure, sure],
     )
-    extra = [Edge(0, 2, _step(2.0), 0.1, unsure)]
+    extra = [Edge(0, 2, _step(2.0), 0.1, information=unsure)]
     config = Config().with_values(pose_graph={"graph_weights": weights})
     result = build_pose_graph(odometry, extra, [], config).optimize(anchor_pose=np.eye(4), loop_kernel="none")
     assert result.poses[2][0, 3] == pytest.approx(expected, abs=0.01)
