@@ -56,9 +56,9 @@ def swung(xy: np.ndarray, share: float) -> np.ndarray:
     return np.column_stack([np.interp(stations, along, xy[:, 0]), np.interp(stations, along, xy[:, 1])])
 
 
-def flight(name: str, scans: int | None, swing: float):
+def flight(name: str, scans: int | None, swing: float, variant: str = "tile"):
     scene, above, first = FLIGHTS[name]
-    field, xy = surface_of(scene)
+    field, xy = surface_of(scene, variant)
     if swing:
         xy = swung(xy, swing)
     ground = float(np.median(field.z[field.cell_of(xy)]))
@@ -78,12 +78,14 @@ def main() -> None:
     parser.add_argument("--scans", type=int, default=None, help="the first N scans only (default: all)")
     parser.add_argument("--swing", type=float, default=0.0, help="speed swing, a share (0.3: +-30 %%)")
     parser.add_argument("--gnss-sigma", type=float, default=2.0, help="m, horizontal and vertical")
+    parser.add_argument("--variant", default="tile", help="bench_bias.surface_of's: tile, sparse (the default scene "
+                        "resampled at a real tile's density), linear, smooth")  # fmt: skip
     parser.add_argument(
         "--edges", help="M,DEG: also lidar only and GNSS with these [pose_graph] edge sigmas (m and deg per step)"
     )
     args = parser.parse_args()
     for name in args.flights:
-        data, config = flight(name, args.scans, args.swing)
+        data, config = flight(name, args.scans, args.swing, args.variant)
         start = time.perf_counter()
         slam = Slam(config, anchor=data.poses[0])
         for index in range(len(data)):
@@ -97,7 +99,8 @@ def main() -> None:
         gnss = GnssFixes(np.arange(len(data)), fixes, np.full(3, args.gnss_sigma))
         steps = np.linalg.norm(np.diff(truth[:, :3, 3], axis=0), axis=1)
         print(
-            f"{name}{' swing ' + str(args.swing) if args.swing else ''}: {len(data)} scans, {len(indices)} nodes, "
+            f"{name}{' swing ' + str(args.swing) if args.swing else ''} ({args.variant}): {len(data)} scans, "
+            f"{len(indices)} nodes, "
             f"step {steps.min():.2f}-{steps.max():.2f} m, {len(slam.loops.loops)} loops, "
             f"ATE odometry {ate(odometry.poses, truth).rmse:.3f} m; registered in {registered:.0f} s"
         )
