@@ -197,7 +197,7 @@ class LoopClosureConfig(BoundedTable):
         3.0, "uncertainty search: an old submap is a candidate if within the radius this many sigmas away"
     )
     skip_after_loop: int = param(
-        0, "no query for this many accepted scans after a loop edge closed on the same place (0: query every scan)"
+        6, "no query for this many accepted scans after a loop edge closed on the same place (0: the reference)"
     )
     max_attempts: int = param(3, "submaps registered at most per query, nearest first")
     max_returned: int = param(3, "matching submaps kept at most, best first")
@@ -334,7 +334,7 @@ class Config:
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
     "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
-    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth"},
+    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth", "skip_after_loop": 0},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order

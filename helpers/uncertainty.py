@@ -82,13 +82,15 @@ def adjoint(T: np.ndarray) -> np.ndarray:
 
 
 class RelativeUncertainty:
-    """The run's pose graph for one question: how uncertain is the current
-    node's position relative to an old node (see the module's docstring)::
+    """The run's pose graph for two questions: where does it put an old node
+    relative to the current one, and how uncertain is that offset (see the
+    module's docstring)::
 
         graph = RelativeUncertainty(config.pose_graph)
         graph.add_node(pose)  # each accepted scan, in order (odometry step from the previous one)
         graph.add_edge(edge)  # an edge back; graph.add_edge(loop, loop=True) for a loop edge
         cov = graph.position_covariances(old_nodes)  # (K, 3, 3), map frame, m²
+        where = graph.positions(old_nodes)  # (K, 3), map frame, beside the current node's odometry position
 
     ``seconds``, ``refreshes`` and ``answers`` say what the answers cost.
     """
