@@ -52,6 +52,10 @@ SUMMARIES = {
     "05": "recognising a place seen before; the reference's main loop written out and checked against the pipeline",
     "06": "one loop edge on a line, the same chain in GTSAM factor by factor, then our graph and a robust kernel",
     "07": "the rebuilt map scored against the truth, and the reference workflow against ours on the same flight",
+    "08": (
+        "a sparse tile flown low, where the reference's values lose the track; how sure each step is, drawn "
+        "along the track; a motion factor and GNSS fixes added to the graph factor by factor"
+    ),
 }
 
 # Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.

@@ -9,7 +9,8 @@
   :mod:`~helpers.viz.registration_figures` and :mod:`~helpers.viz.sweep_figures` (3),
   :mod:`~helpers.viz.submap_figures` (4), :mod:`~helpers.viz.loop_figures` and
   :mod:`~helpers.viz.loop_search` (5),
-  :mod:`~helpers.viz.graph_figures` (6), :mod:`~helpers.viz.map_figures` (7);
+  :mod:`~helpers.viz.graph_figures` (6), :mod:`~helpers.viz.map_figures` (7),
+  :mod:`~helpers.viz.ground_figures` (8);
   :mod:`~helpers.viz.plots` and :mod:`~helpers.viz.figures` gather them under
   the names the notebooks use.
 

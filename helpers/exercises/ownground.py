@@ -1,0 +1,119 @@
+"""Checks for the exercises of notebook 8 (your own ground).
+
+* :func:`check_motion_sigma`: the translation sigma of a constant-velocity
+  factor from a speed, a node spacing and an acceleration, and whether it is
+  surer along the track than the lidar's steps.
+* :func:`check_weak_direction`: the horizontal direction an edge's
+  information pins least, and its sigma there.
+* :func:`check_sparse_fixes`: the ATE of a graph given a GNSS fix on every
+  few nodes only, recomputed here with GTSAM.
+"""
+
+from __future__ import annotations
+
+import gtsam
+import numpy as np
+
+from ..metrics import ate
+from . import say, unanswered
+
+
+def _motion_sigma(spacing: float, speed: float, acceleration: float) -> float:
+    """How much a step (m) may change between consecutive nodes: ``a dt^2``, ``dt = spacing / speed``."""
+    dt = spacing / speed
+    return acceleration * dt**2
+
+
+def check_motion_sigma(sigma, spacing: float, speed: float, acceleration: float, surer, along_sigmas) -> None:
+    """Exercise 1: ``sigma`` (m) of a constant-velocity factor for nodes
+    ``spacing`` m apart flown at ``speed`` m/s by a drone that accelerates by
+    at most ``acceleration`` m/s²; ``surer``: whether it is below the median of
+    ``along_sigmas``, the steps' sigmas along the track (m)."""
+    hint = "the time between two nodes is spacing / speed; a step changes by the acceleration times that time squared"
+    if unanswered(sigma) or unanswered(surer):
+        return say(False, "", hint)
+    dt = spacing / speed
+    expected = _motion_sigma(spacing, speed, acceleration)
+    value = float(sigma)
+    if np.isclose(value, acceleration * dt, rtol=0.02):
+        return say(False, "", "that is a change of speed (m/s); the factor compares two steps, in metres: one dt more")
+    if np.isclose(value, 0.5 * acceleration * dt**2, rtol=0.02):
+        return say(False, "", "a dt^2 / 2 is how far a body starting at rest moves; a step changes by a dt^2")
+    if not np.isclose(value, expected, rtol=0.02):
+        return say(False, "", hint)
+    median = float(np.median(along_sigmas))
+    if bool(surer) != (expected < median):
+        return say(False, "", f"compare {expected * 100:.2g} cm with the median of the steps' sigmas along the track")
+    word = "surer" if expected < median else "less sure"
+    say(True, f"{expected * 100:.2g} cm, {word} than the lidar's steps along the track ({median * 100:.2g} cm)", "")
+
+
+def _weak_direction(information) -> tuple[float, float]:
+    """(angle in degrees from x in [0, 180), sigma in m) of the loosest horizontal direction of a
+    translation-first 6 x 6 information: the largest eigenvector of the xy block of its inverse."""
+    block = np.linalg.inv(np.asarray(information, dtype=float))[:2, :2]
+    values, vectors = np.linalg.eigh(block)
+    angle = np.degrees(np.arctan2(vectors[1, 1], vectors[0, 1])) % 180.0
+    return float(angle), float(np.sqrt(values[1]))
+
+
+def _angle_apart(a: float, b: float) -> float:
+    """Degrees between two undirected directions."""
+    d = abs(a - b) % 180.0
+    return min(d, 180.0 - d)
+
+
+def check_weak_direction(information, angle_deg, sigma_m) -> None:
+    """Exercise 2: the horizontal direction ``information`` (6 x 6,
+    translation first) pins least, as an angle from x in degrees, and the
+    sigma (m) along it."""
+    hint = "invert the information (6 x 6) into a covariance; its xy block's eigenvector of the largest eigenvalue"
+    if unanswered(angle_deg) or unanswered(sigma_m):
+        return say(False, "", hint)
+    angle, sigma = _weak_direction(information)
+    info = np.asarray(information, dtype=float)
+    # the 2 x 2 block inverted alone: the rotation taken as known
+    alone = float(np.sqrt(np.linalg.eigvalsh(np.linalg.inv(info[:2, :2]))[1]))
+    if _angle_apart(float(angle_deg), angle) > 2.0:
+        return say(False, "", hint + " (an angle from the x axis: arctan2 of its y and x components)")
+    if np.isclose(float(sigma_m), alone, rtol=0.02) and not np.isclose(alone, sigma, rtol=0.02):
+        return say(False, "", "invert the whole 6 x 6 first, then take the xy block: its block alone assumes "
+                   "the other four directions known exactly")  # fmt: skip
+    if np.isclose(float(sigma_m), sigma**2, rtol=0.02):
+        return say(False, "", "that is a variance (m²): the sigma is its square root")
+    if not np.isclose(float(sigma_m), sigma, rtol=0.02):
+        return say(False, "", "the sigma is the square root of that eigenvalue")
+    say(True, f"{angle:.0f} deg from the heading, {sigma * 100:.2g} cm", "")
+
+
+def _sparse_fixes_ate(every: int, graph, initial, fixes, sigma: float, truth) -> float:
+    """The ATE (m) of ``graph`` given a GPS factor on nodes 0, ``every``, 2 ``every``, ..."""
+    with_fixes = gtsam.NonlinearFactorGraph()
+    for index in range(graph.size()):
+        with_fixes.add(graph.at(index))
+    noise = gtsam.noiseModel.Isotropic.Sigma(3, sigma)
+    for k in range(0, len(fixes), every):
+        with_fixes.add(gtsam.GPSFactor(k, np.asarray(fixes[k], dtype=float), noise))
+    values = gtsam.LevenbergMarquardtOptimizer(with_fixes, initial, gtsam.LevenbergMarquardtParams()).optimize()
+    poses = np.array([values.atPose3(k).matrix() for k in range(initial.size())])
+    return ate(poses, truth).rmse
+
+
+def check_sparse_fixes(ate_value, every: int, graph, initial, fixes, sigma: float, truth) -> None:
+    """Exercise 3: ``ate_value`` (m), the ATE of ``graph`` (without GPS factors)
+    once a fix of ``fixes`` (sigma ``sigma`` m) is added on every ``every``-th node."""
+    hint = (
+        f"add gtsam.GPSFactor(k, fixes[k], noise) for k in range(0, len(fixes), {every}) to before_gnss, "
+        "optimise from initial and compute ate(poses, truth).rmse"
+    )
+    if unanswered(ate_value):
+        return say(False, "", hint)
+    expected = _sparse_fixes_ate(every, graph, initial, fixes, sigma, truth)
+    if not np.isclose(float(ate_value), expected, rtol=0.01, atol=0.005):
+        every_node = _sparse_fixes_ate(1, graph, initial, fixes, sigma, truth)
+        if np.isclose(float(ate_value), every_node, rtol=0.01, atol=0.005):
+            return say(False, "", f"that is the ATE with a fix on every node: keep only every {every}th")
+        return say(False, "", hint)
+    every_node = _sparse_fixes_ate(1, graph, initial, fixes, sigma, truth)
+    say(True, f"ATE {expected:.2f} m with a fix every {every} nodes, {expected / every_node:.2g} times that of a "
+        f"fix on every node (sqrt({every}) = {np.sqrt(every):.2g})", "")  # fmt: skip
