@@ -138,7 +138,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     fixed_id, moving_id = 30, 33
     truth = np.linalg.inv(flight.poses[fixed_id]) @ flight.poses[moving_id]
     far = truth.copy()
-    far[:3, 3] += [40.0, 0.0, 0.0]  # most of the way along the 53 m strip: ICP settles over 100 m off, pairing few points
+    far[:3, 3] += [40.0, 0.0, 0.0]  # most of the 53 m strip along the track: ICP settles 100 m off on few pairs
     monkeypatch.setattr(frames, "estimate_rigid_msac", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(flight.scans[k], config), config) for k in (fixed_id, moving_id))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
