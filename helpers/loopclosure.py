@@ -118,12 +118,14 @@ class LoopCloser:
         """The accepted loop edges, in the order they were found."""
         return [q.closure for q in self.queries if q.closure is not None]
 
-    def add(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses) -> LoopQuery | None:
+    def add(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses, information=None):
         """Add accepted scan ``node`` to the current submap (a new one every
         ``n_scans_per_submap`` scans) and, once there are more than
-        ``sub_map_thresh`` submaps, query the old ones for a loop."""
+        ``sub_map_thresh`` submaps, query the old ones for a loop (a
+        :class:`LoopQuery`, or None). ``information``: that of the odometry
+        step to ``node``, for the uncertainty graph (None: the fixed sigmas)."""
         self.submaps.add_scan(cloud, pose)
-        self._follow(node, poses)
+        self._follow(node, poses, information)
         if len(self.submaps) <= self.settings.sub_map_thresh:
             return None
         query = self.query(node, cloud, pose, clouds, poses)
@@ -133,11 +135,16 @@ class LoopCloser:
                 self.uncertainty.add_edge(query.closure, loop=True)
         return query
 
-    def _follow(self, node: int, poses) -> None:
-        """Nodes up to ``node`` into the uncertainty graph, each joined to the one before by its odometry step."""
+    def _follow(self, node: int, poses, information=None) -> None:
+        """Nodes up to ``node`` into the uncertainty graph, each joined to the one before by its odometry step
+        (the last one with ``information``, if given)."""
         if self.uncertainty is not None:
             while self.uncertainty.num_nodes <= node:
-                self.uncertainty.add_node(poses[self.uncertainty.num_nodes])
+                k = self.uncertainty.num_nodes
+                step = None
+                if k == node and k > 0 and information is not None:
+                    step = Edge(k - 1, k, np.linalg.inv(poses[k - 1]) @ poses[k], information=information)
+                self.uncertainty.add_node(poses[k], step)
 
     def add_edges(self, edges) -> None:
         """Edges the run measured besides the odometry steps and the loops (its edges back), for the uncertainty."""
@@ -154,7 +161,11 @@ class LoopCloser:
         covariances, centres, extents = None, submaps.centres, None
         self._follow(node, poses)
         if self.uncertainty is not None:
-            covariances, centres, extents = self._uncertain_centres(pose[:3, 3], poses)
+            try:
+                covariances, centres, extents = self._uncertain_centres(pose[:3, 3], poses)
+            except SlamError as exc:  # never a crash: this query searches the grown radius instead
+                log.warning("scan %d: %s; searching the grown radius instead", node, exc)
+                covariances, centres, extents = None, submaps.centres, None
         candidates = find_loop_candidates(
             submaps.points,
             centres,

@@ -183,11 +183,12 @@ class Slam:
         node, config = len(self.indices), self.config
         # 1. Odometry: register the scan onto the previous accepted one (prepared once, for every stage).
         start = time.perf_counter()
-        fallback = None
+        fallback, information = None, None
         if self.given is None:
             frame = prepare(check_points(scan, f"scan {index}"), config)
             pair = self.odometry.register(frame, index)
             fallback = pair.fallback if pair is not None else None
+            information = pair.information if pair is not None else None
             self.icp.keep(frame.icp_points, frame.icp)
             cloud, poses, relative = frame.icp_points, self.odometry.poses, self.odometry.relative
         else:
@@ -199,7 +200,7 @@ class Slam:
         self.runtime["odometry"] += time.perf_counter() - start
         # 2. Submap and loop query, on the odometry poses.
         start = time.perf_counter()
-        query = self.loops.add(node, cloud, poses[node], self.clouds, poses)
+        query = self.loops.add(node, cloud, poses[node], self.clouds, poses, information)
         self.runtime["submaps_and_loop_closure"] += time.perf_counter() - start
         # 3. Edges back, from the chained odometry.
         start = time.perf_counter()

@@ -52,20 +52,20 @@ ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any e
 
 
 def edge_information(edge: Edge, settings: PoseGraphConfig, *, loop: bool = False) -> np.ndarray:
-    """The (6, 6) translation-first information of ``edge`` in the graph.
-
-    ``edge.information`` when the edge carries one (the registration's,
-    calibrated); otherwise what :func:`helpers.slam.build_pose_graph` gives it
-    today: with ``graph_weights = "icp"`` the sigmas of ``[pose_graph]``
-    times the steps spanned (a loop edge: once), with ``"identity"`` the
-    reference's 1 m and 1 rad.
+    """The (6, 6) translation-first information of ``edge`` in the graph,
+    exactly as :func:`helpers.slam.build_pose_graph` weighs it: with
+    ``graph_weights = "hessian"`` the registration's own (``edge.information``,
+    calibrated; an edge back's divided by the steps it spans), with ``"icp"``
+    the sigmas of ``[pose_graph]`` times the steps spanned (a loop edge: once),
+    with ``"identity"`` the reference's 1 m and 1 rad. An edge without its own
+    information gets the icp sigmas.
     """
-    information = getattr(edge, "information", None)
-    if information is not None:
-        return check_information(information)
-    if settings.graph_weights != "icp":
-        return np.eye(6)
     span = 1 if loop else abs(edge.j - edge.i)
+    information = getattr(edge, "information", None)
+    if settings.graph_weights == "hessian" and information is not None:
+        return check_information(information) / span
+    if settings.graph_weights == "identity":
+        return np.eye(6)
     return information_from_sigmas(settings.edge_sigmas * span)
 
 

@@ -86,7 +86,7 @@ def test_a_loop_edge_shrinks_the_covariance_as_two_parallel_measurements():
     np.testing.assert_allclose(after[1], middle * np.eye(3), rtol=1e-5, atol=1e-9)
 
 
-def test_edges_back_take_the_sigmas_times_their_span_or_their_own_information():
+def test_edges_take_the_weights_the_pose_graph_gives_them():
     settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
     back = Edge(3, 7, np.eye(4))
     np.testing.assert_allclose(np.diag(edge_information(back, settings)), (4 * settings.edge_sigmas) ** -2.0)
@@ -95,7 +95,11 @@ def test_edges_back_take_the_sigmas_times_their_span_or_their_own_information():
     own = np.diag([4.0, 1.0, 9.0, 100.0, 100.0, 100.0])
     measured = Edge(3, 7, np.eye(4))
     object.__setattr__(measured, "information", own)  # as the registration will hand it over
-    np.testing.assert_allclose(edge_information(measured, settings), own)
+    # icp weights ignore it, as build_pose_graph does; hessian weights take it, an edge back's divided by its span
+    np.testing.assert_allclose(edge_information(measured, settings), edge_information(back, settings))
+    hessian = PoseGraphConfig(graph_weights="hessian")
+    np.testing.assert_allclose(edge_information(measured, hessian), own / 4)
+    np.testing.assert_allclose(edge_information(measured, hessian, loop=True), own)
 
 
 def test_the_gate_keeps_a_true_revisit_and_refuses_a_far_place():
