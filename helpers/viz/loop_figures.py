@@ -94,12 +94,17 @@ def candidates_figure(
     return fig
 
 
-def search_radius_figure(flown, apparent, found, base_radius: float, growth: float):
+def search_radius_figure(flown, apparent, found, base_radius: float, growth: float, radius=None):
     """For every query: the distance flown since the place it revisits (x)
     against how far away that place looks on the odometry (y), with the
     reference's fixed radius and the grown one. Places below a line are in
-    reach of that search."""
+    reach of that search. ``radius``, when given: the radius each query
+    searched around that place (nan where it left no record), as diamonds."""
     flown, apparent, found = map(np.asarray, (flown, apparent, found))
+    if radius is not None:
+        radius = np.asarray(radius, float)
+        kept = np.isfinite(radius)
+        ax_label = "radius the query searched (uncertainty gate)"
     fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
     x = np.linspace(0, 1.05 * flown.max(), 50)
     ax.plot(x, np.full_like(x, base_radius), "--", color="black", lw=1.5, label=f"fixed radius {base_radius:.1f} m")
@@ -123,6 +128,8 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
     ax.scatter(
         flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="queries that did not"
     )
+    if radius is not None:
+        ax.scatter(flown[kept], radius[kept], s=24, marker="D", color="none", edgecolor=COLORS["loop"], label=ax_label)
     ax.set(
         xlabel="distance flown since the revisited submap (m)",
         ylabel="its distance on the odometry (m)",
