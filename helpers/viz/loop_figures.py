@@ -26,7 +26,7 @@ def candidates_figure(
     """Top view around one query: every submap centre (eligible black,
     too recent light grey), the scan's odometry position (red star) and its
     true position (green star), the reference's fixed search circle (dashed)
-    and each eligible submap's grown radius drawn as a faint ring. Tried
+    and each eligible submap's search radius drawn as a faint ring. Tried
     submaps are ringed in orange, matched ones filled orange."""
     c = xy_of(centres)
     p = np.asarray(position)[:2]
@@ -57,7 +57,7 @@ def candidates_figure(
                 color=COLORS["loop"],
                 lw=2,
                 zorder=4,
-                label=f"grown radius {radius[nearest]:.1f} m (nearest old submap)",
+                label=f"search radius {radius[nearest]:.1f} m (nearest old submap)",
             )
         )
     tried, matched = np.asarray(tried, int), np.asarray(matched, int)
@@ -95,7 +95,7 @@ def candidates_figure(
 
 
 def search_radius_figure(flown, apparent, found, base_radius: float, growth: float, radius=None):
-    """For every query: the distance flown since the place it revisits (x)
+    """For every node: the distance flown since the place it revisits (x)
     against how far away that place looks on the odometry (y), with the
     reference's fixed radius and the grown one. Places below a line are in
     reach of that search. ``radius``, when given: the radius each query
@@ -113,7 +113,7 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
         base_radius + growth * x,
         color=COLORS["loop"],
         lw=2,
-        label=f"grown radius: {base_radius:.1f} m + {growth:.0%} of the distance flown",
+        label=f'grown radius (search = "growth"): {base_radius:.1f} m + {growth:.0%} of the distance flown',
     )
     ax.scatter(
         flown[found],
@@ -123,10 +123,10 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
         edgecolor="black",
         lw=0.5,
         zorder=3,
-        label="queries that closed a loop",
+        label="nodes that closed a loop",
     )
     ax.scatter(
-        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="queries that did not"
+        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="nodes that did not"
     )
     if radius is not None:
         ax.scatter(flown[kept], radius[kept], s=24, marker="D", color="none", edgecolor=COLORS["loop"], label=ax_label)

@@ -15,7 +15,7 @@ from ..submaps import centre_scan_id
 def query_search(result, node: int, poses_gt) -> dict:
     """What the loop query of ``node`` saw, as the pipeline recorded it
     (:class:`helpers.pipeline.LoopQuery`): the submap centres that existed
-    then (odometry frame), how many were eligible, each one's grown search
+    then (odometry frame), how many were eligible, each one's search
     radius, the submaps registered by ICP (nearest first) and those matched;
     with the scan's odometry and true positions (``poses_gt``: (K, 4, 4), the
     true poses of the nodes, e.g. ``dataset.poses[result.indices]``)."""
