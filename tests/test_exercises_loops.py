@@ -2,6 +2,7 @@
 
 from types import SimpleNamespace
 
+import gtsam
 import numpy as np
 import pytest
 
@@ -19,17 +20,67 @@ def pose(x, y, yaw_deg=0.0):
     return T
 
 
-def test_search_radius(capsys):
-    config = Config()
-    query = SimpleNamespace(node=50, radius=np.array([12.0, 11.5, 11.0]))
-    result = SimpleNamespace(config=config, queries=[query])
-    assert check_search_radius(result, 50, 1, 11.5)
+def straight_run(config, n_nodes=60, step=6.0):
+    """A run flown straight along x, one node every ``step`` m, no edge back, no loop."""
+    poses = np.array([pose(step * k, 0.0) for k in range(n_nodes)])
+    n = config.map.n_scans_per_submap
+    centres = poses[n // 2 : n * (n_nodes // n) : n, :3, 3]
+    return SimpleNamespace(
+        config=config,
+        queries=[SimpleNamespace(node=n_nodes - 1)],
+        poses_odometry=poses,
+        odometry=SimpleNamespace(information=[]),
+        submaps=SimpleNamespace(centres=centres),
+        extra_edges=[],
+        loops=[],
+    )
+
+
+def test_search_radius_growth(capsys):
+    config = Config.reference().with_values(loop_closure={"loop_search_growth": 0.02})
+    result = straight_run(config)
+    flown = 6.0 * (59 - 1)  # from submap 0's centre (node 1) to node 59
+    truth = config.loop_closure.loop_closure_search_radius + 0.02 * flown
+    assert check_search_radius(result, 59, 0, truth + 0.01)
     assert capsys.readouterr().out.startswith("correct:")
-    assert not check_search_radius(result, 50, 1, config.loop_closure.loop_closure_search_radius)
-    assert not check_search_radius(result, 50, 1, None)
+    assert not check_search_radius(result, 59, 0, config.loop_closure.loop_closure_search_radius)
+    assert not check_search_radius(result, 59, 0, None)
     assert capsys.readouterr().out.count("not yet:") == 2
     with pytest.raises(SlamError):
-        check_search_radius(result, 49, 1, 11.5)
+        check_search_radius(result, 58, 0, truth)
+
+
+def test_search_radius_uncertainty(capsys):
+    """The gate's radius from the marginal covariance of submap 0's centre node
+    with the current node held (GTSAM's Marginals, computed here directly)."""
+    config = Config()
+    assert config.loop_closure.search == "uncertainty"
+    result = straight_run(config)
+    poses, node, centre = result.poses_odometry, 59, 1
+    graph = gtsam.NonlinearFactorGraph()
+    values = gtsam.Values()
+    sigmas = config.pose_graph.edge_sigmas  # translation first; GTSAM's order is rotation first
+    noise = gtsam.noiseModel.Diagonal.Sigmas(np.concatenate([sigmas[3:], sigmas[:3]]))
+    for k, T in enumerate(poses):
+        values.insert(k, gtsam.Pose3(T))
+        if k:
+            graph.add(gtsam.BetweenFactorPose3(k - 1, k, gtsam.Pose3(np.linalg.inv(poses[k - 1]) @ T), noise))
+    graph.add(gtsam.PriorFactorPose3(node, gtsam.Pose3(poses[node]), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+    covariance = gtsam.Marginals(graph, values).marginalCovariance(centre)[3:, 3:]  # node 1's frame = the map's
+    offset = poses[centre, :3, 3] - poses[node, :3, 3]
+    u = offset / np.linalg.norm(offset)
+    extent = 6.0  # submap 0's scans lie 6 m either side of its centre
+    settings = config.loop_closure
+    truth = (
+        settings.loop_closure_search_radius
+        + extent
+        + settings.search_sigmas / np.sqrt(u @ np.linalg.inv(covariance) @ u)
+    )
+    assert truth > settings.loop_closure_search_radius + extent + 1.0  # drift along the track widens it
+    assert check_search_radius(result, node, 0, truth + 0.02)
+    assert capsys.readouterr().out.startswith("correct:")
+    assert not check_search_radius(result, node, 0, truth + 0.2)
+    assert "search_sigmas" in capsys.readouterr().out
 
 
 def test_false_loop(capsys):

@@ -26,7 +26,7 @@ def candidates_figure(
     """Top view around one query: every submap centre (eligible black,
     too recent light grey), the scan's odometry position (red star) and its
     true position (green star), the reference's fixed search circle (dashed)
-    and each eligible submap's grown radius drawn as a faint ring. Tried
+    and each eligible submap's search radius drawn as a faint ring. Tried
     submaps are ringed in orange, matched ones filled orange."""
     c = xy_of(centres)
     p = np.asarray(position)[:2]
@@ -57,7 +57,7 @@ def candidates_figure(
                 color=COLORS["loop"],
                 lw=2,
                 zorder=4,
-                label=f"grown radius {radius[nearest]:.1f} m (nearest old submap)",
+                label=f"search radius {radius[nearest]:.1f} m (nearest old submap)",
             )
         )
     tried, matched = np.asarray(tried, int), np.asarray(matched, int)
@@ -94,12 +94,17 @@ def candidates_figure(
     return fig
 
 
-def search_radius_figure(flown, apparent, found, base_radius: float, growth: float):
-    """For every query: the distance flown since the place it revisits (x)
+def search_radius_figure(flown, apparent, found, base_radius: float, growth: float, radius=None):
+    """For every node: the distance flown since the place it revisits (x)
     against how far away that place looks on the odometry (y), with the
     reference's fixed radius and the grown one. Places below a line are in
-    reach of that search."""
+    reach of that search. ``radius``, when given: the radius each query
+    searched around that place (nan where it left no record), as diamonds."""
     flown, apparent, found = map(np.asarray, (flown, apparent, found))
+    if radius is not None:
+        radius = np.asarray(radius, float)
+        kept = np.isfinite(radius)
+        ax_label = "radius the query searched (uncertainty gate)"
     fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
     x = np.linspace(0, 1.05 * flown.max(), 50)
     ax.plot(x, np.full_like(x, base_radius), "--", color="black", lw=1.5, label=f"fixed radius {base_radius:.1f} m")
@@ -108,7 +113,7 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
         base_radius + growth * x,
         color=COLORS["loop"],
         lw=2,
-        label=f"grown radius: {base_radius:.1f} m + {growth:.0%} of the distance flown",
+        label=f'grown radius (search = "growth"): {base_radius:.1f} m + {growth:.0%} of the distance flown',
     )
     ax.scatter(
         flown[found],
@@ -118,11 +123,13 @@ def search_radius_figure(flown, apparent, found, base_radius: float, growth: flo
         edgecolor="black",
         lw=0.5,
         zorder=3,
-        label="queries that closed a loop",
+        label="nodes that closed a loop",
     )
     ax.scatter(
-        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="queries that did not"
+        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="nodes that did not"
     )
+    if radius is not None:
+        ax.scatter(flown[kept], radius[kept], s=24, marker="D", color="none", edgecolor=COLORS["loop"], label=ax_label)
     ax.set(
         xlabel="distance flown since the revisited submap (m)",
         ylabel="its distance on the odometry (m)",

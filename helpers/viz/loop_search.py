@@ -15,7 +15,7 @@ from ..submaps import centre_scan_id
 def query_search(result, node: int, poses_gt) -> dict:
     """What the loop query of ``node`` saw, as the pipeline recorded it
     (:class:`helpers.pipeline.LoopQuery`): the submap centres that existed
-    then (odometry frame), how many were eligible, each one's grown search
+    then (odometry frame), how many were eligible, each one's search
     radius, the submaps registered by ICP (nearest first) and those matched;
     with the scan's odometry and true positions (``poses_gt``: (K, 4, 4), the
     true poses of the nodes, e.g. ``dataset.poses[result.indices]``)."""
@@ -42,11 +42,14 @@ def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
     """Every node that truly flies over an eligible old submap (true centre
     within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
     the nodes): the distance flown since that submap, how far away it looks on
-    the odometry, and whether the node closed a loop."""
+    the odometry, whether the node closed a loop, and the search radius its
+    query recorded around that submap (nan: the node registered no submap, so
+    its query left no record)."""
     n = result.config.map.n_scans_per_submap
     subs = result.submaps.submaps
     true_centres = np.array([poses_gt[centre_scan_id(s.id, len(s.scan_ids))][:3, 3] for s in subs])
     closed = {loop.j for loop in result.loops}
+    queries = {q.node: q for q in result.queries}
     rows = []
     for node in range(len(result.indices)):
         count = (node + 1) // n
@@ -60,6 +63,13 @@ def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
         position = result.poses_odometry[node][:3, 3]
         flown = distance_flown_since(result.submaps.centres[:count], position)[k]
         apparent = np.linalg.norm(result.submaps.centres[k] - position)
-        rows.append((node, flown, apparent, node in closed))
-    nodes, flown, apparent, found = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 4
-    return {"nodes": nodes, "flown": flown, "apparent": apparent, "closed": np.asarray(found, bool)}
+        radius = queries[node].radius[k] if node in queries else np.nan
+        rows.append((node, flown, apparent, node in closed, radius))
+    nodes, flown, apparent, found, radius = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 5
+    return {
+        "nodes": nodes,
+        "flown": flown,
+        "apparent": apparent,
+        "closed": np.asarray(found, bool),
+        "radius": np.asarray(radius, float),
+    }
