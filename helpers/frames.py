@@ -27,7 +27,7 @@ from .config import Config, RegistrationConfig
 from .errors import SlamError
 from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
-from .icp import IcpCloud, icp_cloud, pairing
+from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
 from .overlap import crop, cropped_cloud
 from .registration import estimate_rigid_msac
@@ -141,6 +141,7 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     ends far off. Never raises on a hard pair: the reason is in ``fallback``.
     ``icp`` is the run's :class:`helpers.icp_service.IcpService` (one from
     ``[registration]`` when None)."""
+    momentum = guess is not None  # a last motion to fall back on (not the first step's identity)
     guess = np.eye(4) if guess is None else guess
     features, fit = config.features, config.registration
     timings, fallback = {}, None
@@ -199,6 +200,22 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             )
             refined, T_coarse, constraint = retry, guess, constraint_retry
             T_fine, rmse = retry
+    # 5. On ground too flat to pin a slide along it, a result far from the last motion is a guess the scans
+    # cannot confirm (a lake or a field matches itself anywhere): ICP from the last motion, the flight's momentum.
+    slide = float(np.linalg.norm((np.linalg.inv(guess) @ T_fine)[:3, 3]))
+    if (
+        momentum
+        and constraint < WEAK_CONSTRAINT
+        and slide > fit.tracking_max_jump_m
+        and not np.allclose(T_coarse, guess)
+    ):
+        refined, T_coarse = _icp(moving, fixed, guess, fit, icp), guess
+        T_fine, rmse = refined
+        fallback = (
+            f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {slide:.1f} m from the "
+            "last motion; ICP from the last motion kept"
+        )
+        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,

@@ -36,6 +36,7 @@ import gtsam
 import numpy as np
 
 from .factors import pose3
+from .icp import WEAK_CONSTRAINT
 from .information import TRANSLATION_FIRST, weakest, whitened
 from .loopclosure import radius_after
 from .sensor import index_ranges
@@ -48,7 +49,6 @@ FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation dis
 MAX_CORRECTION_SHARE = 0.01  # loops moving a pose by more than this share of the distance flown: weak odometry
 # (on good odometry the loops move the trajectory by a fraction of this; beyond it the trajectory stays off the
 # truth between the places where loops closed)
-WEAK_CONSTRAINT = 0.005  # below this ICP cannot tell a slide along the ground (a good step lies well above it)
 WEAK_SIGMA_M = 0.5  # m: a step whose weakest direction is this loose was not pinned (the calibrated sigmas of
 # good steps lie well below it, benchmarks/bench_information.py; on flat ground they reach metres)
 CORRECTION_FLOOR_M = 0.35  # m: loops moving no pose by more than this leave less drift than issue 21 asks of a

@@ -31,6 +31,9 @@ from .registration import SAMPLE_SIZE
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
 GICP_EPSILON = 1e-3  # generalized ICP: a point's covariance is this thin across its plane (Open3D's default)
 SMALL_GICP_TYPES = {"point-to-point": "ICP", "point-to-plane": "PLANE_ICP", "plane-to-plane": "GICP"}
+# Below this :func:`pairing` constraint ICP cannot tell a slide along the ground (a good step lies well above it):
+# the health report counts such steps, and the registration trusts no jump on them.
+WEAK_CONSTRAINT = 0.005
 
 
 @dataclass(frozen=True, eq=False)

@@ -151,3 +151,23 @@ def _nudge(metres: float) -> np.ndarray:
     nudge = np.eye(4)
     nudge[:3, 3] = [metres, 0.0, 0.0]
     return nudge
+
+
+def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat_plane, monkeypatch):
+    """Over a plane every horizontal slide scores the same, so a robust fit
+    (here forced) 4 m off is as good as any to ICP: the registration must
+    see that the pairs pin nothing along the plane and keep the last motion
+    (the flight's momentum) instead of the jump."""
+    import helpers
+    import helpers.frames as frames
+
+    data = helpers.create_dataset(*flat_plane)
+    config = Config()
+    truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
+    far = truth.copy()
+    far[:3, 3] += [4.0, 0.0, 0.0]  # still over the plane: as many pairs as the truth
+    monkeypatch.setattr(frames, "estimate_rigid_msac", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
+    pair = register_frames(moving, fixed, config, guess=truth)
+    assert "too flat" in (pair.fallback or ""), pair.fallback
+    assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.5
