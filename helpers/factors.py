@@ -28,8 +28,8 @@ from typing import Protocol
 import gtsam
 import numpy as np
 
-from .config import LOOP_KERNELS
 from .errors import SlamError
+from .pose_graph_config import LOOP_KERNELS
 
 # The reference weighs every edge, odometry and loop alike, with the identity
 # information matrix: one sigma of 1 m on each translation and 1 rad on each
