@@ -6,7 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
-from .style import COLORS, grid, segments, xy_of
+from .style import COLORS, grid, inset_zoom, segments, xy_of
 
 
 def loop_arcs(a, b, bend: float = 0.25, points: int = 24) -> np.ndarray:
@@ -106,10 +106,7 @@ def pose_graph_figure(poses, loop_pairs, every: int = 1, inset=None, inset_at=(0
     grid(ax)
     ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
     if inset is not None:
-        zoom = ax.inset_axes(list(inset_at))
-        draw(zoom, 14)
-        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
-        ax.indicate_inset_zoom(zoom, edgecolor="black")
+        inset_zoom(ax, lambda axis: draw(axis, 14), inset, inset_at)
     return fig
 
 
@@ -174,10 +171,7 @@ def trajectories_figure(
     grid(ax)
     ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
     if inset is not None:
-        zoom = ax.inset_axes(list(inset_at))
-        draw(zoom)
-        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
-        ax.indicate_inset_zoom(zoom, edgecolor="black")
+        inset_zoom(ax, draw, inset, inset_at)
     return fig
 
 

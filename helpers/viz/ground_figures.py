@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse
 
-from .style import COLORS, grid, xy_of
+from .style import COLORS, grid, inset_zoom, xy_of
 
 # One colour per run or stage of notebook 8's graph: the shared odometry red and optimised blue first, then
 # colours no other notebook gives a meaning (purple is the reference's run, orange the loop edges).
@@ -37,10 +37,7 @@ def runs_figure(
     grid(ax)
     ax.legend(fontsize=9, loc="upper left")
     if inset is not None:
-        zoom = ax.inset_axes(list(inset_at))
-        draw(zoom)
-        zoom.set(xlim=inset[:2], ylim=inset[2:], aspect="equal", xticks=[], yticks=[])
-        ax.indicate_inset_zoom(zoom, edgecolor="black")
+        inset_zoom(ax, draw, inset, inset_at)
     return fig
 
 

@@ -44,6 +44,16 @@ def xy_of(trajectory) -> np.ndarray:
     return trajectory[:, :2, 3] if trajectory.ndim == 3 else trajectory[:, :2]
 
 
+def inset_zoom(ax, draw, window, at) -> None:
+    """A zoom on ``window`` = (xmin, xmax, ymin, ymax) of a top view, drawn by
+    ``draw(axis)`` into an inset at ``at`` (x0, y0, width, height in axes
+    fractions), its frame marked on ``ax``."""
+    zoom = ax.inset_axes(list(at))
+    draw(zoom)
+    zoom.set(xlim=window[:2], ylim=window[2:], aspect="equal", xticks=[], yticks=[])
+    ax.indicate_inset_zoom(zoom, edgecolor="black")
+
+
 def segments(a, b) -> np.ndarray:
     """(L, 2, 2) top-view segments from two (L, 2+) arrays of end points."""
     return np.stack([np.asarray(a)[:, :2], np.asarray(b)[:, :2]], axis=1)
