@@ -72,6 +72,7 @@ def build_flight(options: dict):
     from helpers.fitting import fit_to_flight, flight_of
     from helpers.mapio import IDENTITY_FRAME, height_field_from_points, read_map
     from helpers.sensor import Surface, poses_from_waypoints
+    from helpers.tiles import sparse_tile
 
     name, laps = options["name"], options["laps"]
     if name == "default":
@@ -81,7 +82,7 @@ def build_flight(options: dict):
         field = default_scene(seed=int(seed))
         xy, above = _turned(read_waypoints(DEFAULT_WAYPOINTS)[:, :2], field), None
     elif name.startswith("sparse-"):
-        field, above = _sparse(default_scene()), float(name.split("-")[1])
+        field, above = sparse_tile(default_scene()), float(name.split("-")[1])
         xy = _laps(fitted_loop(field), laps)
     elif name.startswith("autzen-"):
         if not AUTZEN.exists():
@@ -151,24 +152,6 @@ def _swung(xy, swing: float):
         s += spacing * (1 + swing * np.sin(2 * np.pi * s / period))
     s = np.array(out)
     return np.column_stack([np.interp(s, along, xy[:, 0]), np.interp(s, along, xy[:, 1])])
-
-
-def _sparse(field, density: float = 1.8, size: float = 300.0):
-    """A ``size`` m square from the middle of ``field``, sampled at ``density`` points per m² and rebuilt
-    as a tile is (the size and density of a real tile)."""
-    import numpy as np
-    from scipy.interpolate import RegularGridInterpolator
-
-    from helpers.dataset import MAP_CELL
-    from helpers.mapio import height_field_from_points
-
-    rng = np.random.default_rng(0)
-    xmin, xmax, ymin, ymax = field.bounds
-    centre = np.array([(xmin + xmax) / 2, (ymin + ymax) / 2])
-    xy = rng.uniform(centre - size / 2, centre + size / 2, (int(density * size**2), 2))
-    x, y = field.grid()
-    z = RegularGridInterpolator((y[:, 0], x[0]), field.z)(xy[:, ::-1])
-    return height_field_from_points(np.column_stack([xy, z]), field.labels[field.cell_of(xy)], MAP_CELL)
 
 
 def main() -> None:
