@@ -18,6 +18,7 @@ carries the moving scan into the fixed scan's frame.
 
 from __future__ import annotations
 
+import functools
 import time
 from dataclasses import dataclass
 
@@ -174,10 +175,22 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
 
     # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
     start = time.perf_counter()
+
+    def paired_and_constraint(T: np.ndarray) -> tuple[float, float]:
+        if moving.icp is None or fixed.icp is None:
+            return float("nan"), float("nan")
+        return pairing(moving.icp, fixed.icp, T, fit.inlier_distance)
+
+    @functools.cache
+    def from_guess():
+        """ICP from the fallback guess and its pairing, computed once however many checks below ask for it."""
+        retry = _icp(moving, fixed, guess, fit, icp)
+        return retry, paired_and_constraint(retry[0])
+
     refined = _icp(moving, fixed, T_coarse, fit, icp)
     T_fine, rmse = refined
     if rmse > fit.icp_fallback_rmse and fallback is None:
-        retry = _icp(moving, fixed, guess, fit, icp)
+        retry, _ = from_guess()
         T_retry, rmse_retry = retry
         fallback = f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m from the robust fit; "
         if rmse_retry < rmse:
@@ -185,14 +198,11 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
         else:
             fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
-    paired, constraint = float("nan"), float("nan")
-    if moving.icp is not None and fixed.icp is not None:
-        paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
+    paired, constraint = paired_and_constraint(T_fine)
     # 4. A fit that pairs little of the scan can still score a low RMSE over its few pairs (flat, sparse ground
     # matches itself metres away): ICP from the previous motion too, and the one that pairs more is kept.
     if paired < fit.tracking_min_overlap and not np.allclose(T_coarse, guess):
-        retry = _icp(moving, fixed, guess, fit, icp)
-        paired_retry, constraint_retry = pairing(moving.icp, fixed.icp, retry[0], fit.inlier_distance)
+        retry, (paired_retry, constraint_retry) = from_guess()
         if paired_retry > paired:
             fallback = (
                 f"ICP from the robust fit paired {paired:.0%} of the points; restarted from the previous motion, "
@@ -209,13 +219,12 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
         and slide > fit.tracking_max_jump_m
         and not np.allclose(T_coarse, guess)
     ):
-        refined, T_coarse = _icp(moving, fixed, guess, fit, icp), guess
-        T_fine, rmse = refined
         fallback = (
             f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {slide:.1f} m from the "
             "last motion; ICP from the last motion kept"
         )
-        constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)[1]
+        refined, (_, constraint) = from_guess()
+        T_coarse, (T_fine, rmse) = guess, refined
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,
