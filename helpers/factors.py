@@ -128,6 +128,26 @@ class LoopFactor(BetweenFactor):
         return gtsam.BetweenFactorPose3(self.i, self.j, pose3(self.T_i_j), noise)
 
 
+def edge_information(edge: Edge, settings, *, loop: bool = False) -> np.ndarray:
+    """The (6, 6) translation-first information of ``edge`` under the
+    ``[pose_graph]`` ``settings``, the one rule the run's pose graph
+    (:func:`helpers.slam.build_pose_graph`) and the loop search's graph
+    (:mod:`helpers.uncertainty`) both weigh their edges by: with
+    ``graph_weights = "hessian"`` the registration's own (``edge.information``,
+    calibrated; an edge back's divided by the steps it spans), with ``"icp"``
+    the sigmas of ``[pose_graph]`` times the steps spanned (a loop edge: once),
+    with ``"identity"`` the reference's 1 m and 1 rad. An edge without its own
+    information gets the icp sigmas.
+    """
+    span = 1 if loop else abs(edge.j - edge.i)
+    information = getattr(edge, "information", None)
+    if settings.graph_weights == "hessian" and information is not None:
+        return check_information(information) / span
+    if settings.graph_weights == "identity":
+        return np.eye(6)
+    return information_from_sigmas(settings.edge_sigmas * span)
+
+
 def information_from_sigmas(sigmas) -> np.ndarray:
     """The diagonal 6 x 6 information matrix of independent sigmas (x y z in m, rx ry rz in rad)."""
     sigmas = np.asarray(sigmas, dtype=float)

@@ -114,9 +114,11 @@ class PoseGraph:
         self.factors.append(factor)
         return factor
 
-    def add_odometry(self, i: int, j: int, T_i_j: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> None:
-        """An odometry edge ``pose_j = pose_i @ T_i_j``, noise ``sigmas`` (x y z rx ry rz)."""
-        self._between(BetweenFactor, i, j, T_i_j, information_from_sigmas(sigmas), "odometry")
+    def add_odometry(self, i: int, j: int, T_i_j: np.ndarray, sigmas=ODOMETRY_SIGMAS, information=None) -> None:
+        """An odometry edge ``pose_j = pose_i @ T_i_j``, noise ``sigmas`` (x y z rx ry rz) or, when given,
+        ``information`` (6 x 6, translation first)."""
+        info = information_from_sigmas(sigmas) if information is None else check_information(information)
+        self._between(BetweenFactor, i, j, T_i_j, info, "odometry")
 
     def append(self, T_last_new: np.ndarray, sigmas=ODOMETRY_SIGMAS) -> int:
         """Chain a new node after the last one, ``T_last_new`` from it (like ``addRelativePose`` without ids);

@@ -27,7 +27,7 @@ import numpy as np
 
 from .config import Config
 from .errors import SlamError
-from .factors import BetweenFactor, Edge, information_from_sigmas, motion_factors
+from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
 from .frames import prepare
 from .geometry import check_points, check_pose
@@ -260,31 +260,21 @@ def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config:
     measures both). An edge without information (an odometry given without
     it, point-to-point ICP) falls back to the icp sigmas.
     """
-    weights = config.pose_graph.graph_weights
-    fixed = weights != "identity"
-    sigmas = config.pose_graph.edge_sigmas if fixed else np.ones(6)
-    own = weights == "hessian"
+    settings = config.pose_graph
     steps = getattr(odometry, "information", ())
-    steps = steps if len(steps) == len(odometry.relative) else ()
+    steps = steps if len(steps) == len(odometry.relative) else [None] * len(odometry.relative)
     graph = PoseGraph()
     pose = odometry.poses[0]
     graph.add_node(pose)
-    for k, step in enumerate(odometry.relative):
+    for step, information in zip(odometry.relative, steps, strict=True):
         pose = pose @ step
         j = graph.add_node(pose)
-        if own and len(steps) and steps[k] is not None:
-            graph.add_factor(BetweenFactor(j - 1, j, step, steps[k]))
-        else:
-            graph.add_odometry(j - 1, j, step, sigmas)
+        edge = Edge(j - 1, j, step, information=information)
+        graph.add_odometry(j - 1, j, step, information=edge_information(edge, settings))
     for edge in extra:
-        if own and edge.information is not None:
-            graph.add_factor(BetweenFactor(edge.i, edge.j, edge.relative, edge.information / (edge.j - edge.i)))
-        else:
-            graph.add_odometry(edge.i, edge.j, edge.relative, sigmas * (edge.j - edge.i if fixed else 1))
-    information = information_from_sigmas(sigmas)
+        graph.add_odometry(edge.i, edge.j, edge.relative, information=edge_information(edge, settings))
     for loop in loops:
-        mine = getattr(loop, "information", None) if own else None
-        graph.add_loop(loop.i, loop.j, loop.relative, information if mine is None else mine)
+        graph.add_loop(loop.i, loop.j, loop.relative, edge_information(loop, settings, loop=True))
     if config.pose_graph.motion_factor:
         for factor in motion_factors(odometry.relative, config.pose_graph):
             graph.add_factor(factor)

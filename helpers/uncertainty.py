@@ -45,28 +45,10 @@ import numpy as np
 
 from .config import PoseGraphConfig
 from .errors import SlamError
-from .factors import Edge, check_information, gaussian, information_from_sigmas, pose3
+from .factors import Edge, edge_information, gaussian, pose3
 
 REFRESH_NODES = 12  # recompute the marginals once the chain since the last computation holds this many nodes
 ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any edge, still well conditioned
-
-
-def edge_information(edge: Edge, settings: PoseGraphConfig, *, loop: bool = False) -> np.ndarray:
-    """The (6, 6) translation-first information of ``edge`` in the graph,
-    exactly as :func:`helpers.slam.build_pose_graph` weighs it: with
-    ``graph_weights = "hessian"`` the registration's own (``edge.information``,
-    calibrated; an edge back's divided by the steps it spans), with ``"icp"``
-    the sigmas of ``[pose_graph]`` times the steps spanned (a loop edge: once),
-    with ``"identity"`` the reference's 1 m and 1 rad. An edge without its own
-    information gets the icp sigmas.
-    """
-    span = 1 if loop else abs(edge.j - edge.i)
-    information = getattr(edge, "information", None)
-    if settings.graph_weights == "hessian" and information is not None:
-        return check_information(information) / span
-    if settings.graph_weights == "identity":
-        return np.eye(6)
-    return information_from_sigmas(settings.edge_sigmas * span)
 
 
 def adjoint(T: np.ndarray) -> np.ndarray:
