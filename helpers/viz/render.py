@@ -48,11 +48,11 @@ def encode(image: np.ndarray, fmt: str = "jpeg") -> bytes:
     return buffer.getvalue()
 
 
-def show(image: np.ndarray, fmt: str = "jpeg"):
-    """Display an RGB array in a notebook as a still image."""
+def show(image: np.ndarray, fmt: str = "jpeg", width: int | None = None):
+    """Display an RGB array in a notebook as a still image, ``width`` CSS pixels wide if given."""
     from IPython.display import Image
 
-    return Image(data=encode(image, fmt), format=fmt)
+    return Image(data=encode(image, fmt), format=fmt, width=width)
 
 
 def figure_image(fig, dpi: int = 80) -> np.ndarray:
@@ -66,10 +66,15 @@ def figure_image(fig, dpi: int = 80) -> np.ndarray:
     return np.asarray(Image.open(buffer).convert("RGB"))
 
 
-def show_figure(fig, fmt: str = "png", dpi: int = 80):
+def show_figure(fig, fmt: str = "png", dpi: int = 80, sharpness: int = 2):
     """Display a matplotlib figure as a still image (and close it). PNG keeps
-    lines and text sharp; pass ``fmt="jpeg"`` for figures full of raster."""
-    return show(figure_image(fig, dpi), fmt)
+    lines and text sharp; pass ``fmt="jpeg"`` for figures full of raster.
+
+    The image is drawn at ``sharpness`` times ``dpi`` and shown at the size
+    ``dpi`` gives, so small text (legends, ticks) stays readable when a
+    browser zooms or a book column shrinks the figure."""
+    image = figure_image(fig, dpi * sharpness)
+    return show(image, fmt, width=round(image.shape[1] / sharpness))
 
 
 def cloud_view(points: np.ndarray, window=WINDOW, **view) -> np.ndarray:
