@@ -1,7 +1,7 @@
 """Calibration of the edges' information: is each edge's error against the truth as large as its covariance says?
 
     nice -n 10 .venv/bin/python benchmarks/bench_information.py [--flights default-700 ...] [--pairs N]
-        [--save FILE | --load FILE] [--scale S] [--min-sigma-m M] [--min-sigma-deg D]
+        [--save FILE | --load FILE] [--scale S] [--min-sigma-m M] [--min-sigma-deg D] [--information gicp|plane]
 
 Each flight (``bench_bias.flight``: a stretch of a loop, parameters fitted as
 ``run`` fits them) runs through SLAM with the raw information (scale 1, no
@@ -45,6 +45,7 @@ from helpers.factors import pose3
 from helpers.information import TRANSLATION_FIRST, calibrated
 from helpers.metrics import ate
 from helpers.pipeline import run_slam
+from helpers.pose_graph_config import INFORMATION_SOURCES
 from helpers.slam import build_pose_graph
 
 # label: (bench_bias flight, surface variant)
@@ -64,11 +65,11 @@ def error_of(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
     return np.asarray(gtsam.Pose3.Logmap(pose3(np.linalg.inv(truth) @ estimate)))[TRANSLATION_FIRST]
 
 
-def measure(label: str, pairs: int) -> dict:
+def measure(label: str, pairs: int, information: str = "gicp") -> dict:
     """The edges of one flight: kind, error (6,), raw information (6 x 6); and what re-optimising needs."""
     name, variant = FLIGHTS[label]
     data, config = flight(name, pairs, variant=variant)
-    config = config.with_values(pose_graph=RAW)
+    config = config.with_values(pose_graph={**RAW, "information": information})
     result = run_slam(data, config)
     gt = data.poses[result.indices]
     edges = []
@@ -153,13 +154,16 @@ def main() -> None:
     parser.add_argument("--scale", type=float, help="information_scale (default: fitted)")
     parser.add_argument("--min-sigma-m", type=float, default=0.01)
     parser.add_argument("--min-sigma-deg", type=float, default=0.01)
+    parser.add_argument(
+        "--information", choices=INFORMATION_SOURCES, default="gicp", help="[pose_graph] information (default gicp)"
+    )
     args = parser.parse_args()
     start = time.perf_counter()
     if args.load:
         with open(args.load, "rb") as file:
             runs = [r for r in pickle.load(file) if r["label"] in args.flights]
     else:
-        runs = [measure(label, args.pairs) for label in args.flights]
+        runs = [measure(label, args.pairs, args.information) for label in args.flights]
         if args.save:
             with open(args.save, "wb") as file:
                 pickle.dump(runs, file)

@@ -26,6 +26,7 @@ from .errors import SlamError
 from .features import to_cloud
 from .geometry import check_points
 from .information import hessian_information, plane_information
+from .pose_graph_config import INFORMATION_SOURCES
 from .registration import SAMPLE_SIZE
 
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
@@ -164,6 +165,7 @@ def refine_icp(
     max_iterations: int,
     tolerance: float,
     backend: str,
+    information: str = "gicp",
 ) -> IcpResult:
     """Refine the guess ``T_fixed_moving`` (4 x 4) by ICP; returns the refined ``(T_fixed_moving, rmse)``
     as an :class:`IcpResult`, which also carries the registration's ``information``.
@@ -184,9 +186,10 @@ def refine_icp(
     ``rmse`` (m) is always the same measure, whatever the metric and back
     end: the root mean square distance from each moved moving point to its
     nearest fixed point, over the pairs closer than ``inlier_distance``;
-    ``inf`` if none is. ``information``: small_gicp's Hessian of its cost, or
-    with Open3D the point-to-plane Hessian of the final pairs, each over its
-    residual variance (:mod:`helpers.information`).
+    ``inf`` if none is. The result's ``information``, over the residual
+    variance (:mod:`helpers.information`): with ``information="gicp"``
+    small_gicp's Hessian of its cost, with ``"plane"`` (and always with
+    Open3D) the point-to-plane Hessian of the final pairs.
     """
     init = np.asarray(T_fixed_moving, dtype=np.float64)
     if metric not in METRICS:
@@ -199,8 +202,10 @@ def refine_icp(
         raise SlamError(f"the ICP inlier distance must be a positive number of metres, got {inlier_distance!r}")
     if not (np.isfinite(tolerance) and tolerance >= 0):
         raise SlamError(f"the ICP tolerance must be zero or a positive number, got {tolerance!r}")
+    if information not in INFORMATION_SOURCES:
+        raise SlamError(f"unknown information source {information!r}: use one of {', '.join(INFORMATION_SOURCES)}")
     if backend == "small_gicp":
-        return _small_gicp(moving, fixed, init, metric, inlier_distance, max_iterations, tolerance)
+        return _small_gicp(moving, fixed, init, metric, inlier_distance, max_iterations, tolerance, information)
 
     reg = o3d.pipelines.registration
     source, target = moving.cloud, fixed.cloud  # Open3D's names
@@ -225,9 +230,10 @@ def refine_icp(
     return IcpResult(transform, rmse, information)
 
 
-def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance):
+def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance, max_iterations, tolerance, source):
     """small_gicp's ICP (its target is our fixed cloud, its source the moving one),
-    then the RMSE of :func:`refine_icp` from the fixed cloud's k-d tree."""
+    then the RMSE of :func:`refine_icp` and, if ``source`` is ``"plane"``, the
+    point-to-plane information, both from one pass over the fixed cloud's k-d tree."""
     result = small_gicp.align(
         fixed.cloud,
         moving.cloud,
@@ -241,11 +247,15 @@ def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance
         translation_epsilon=tolerance,
     )
     transform = np.array(result.T_target_source)
-    squared, _ = fixed.nearest(moving.points @ transform[:3, :3].T + transform[:3, 3])
+    squared, index = fixed.nearest(moving.points @ transform[:3, :3].T + transform[:3, 3])
     paired = squared < inlier_distance**2
     rmse = float(np.sqrt(squared[paired].mean())) if paired.any() else float("inf")
     information = None
-    if metric != "point-to-point":
+    if metric != "point-to-point" and source == "plane":
+        information = plane_information(
+            moving.points, fixed.points, fixed.normals, transform, inlier_distance, lambda _: (squared, index)
+        )
+    elif metric != "point-to-point":
         information = hessian_information(result.H, result.error, result.num_inliers)
     return IcpResult(transform, rmse, information)
 

@@ -60,12 +60,14 @@ class IcpService:
         max_iterations=30,
         information_scale: float | None = None,
         min_sigmas=None,
+        information: str | None = None,
     ):
         self.metric, self.inlier_distance, self.tolerance, self.backend = metric, inlier_distance, tolerance, backend
         self.max_iterations = int(max_iterations)
         graph = PoseGraphConfig()  # the calibration of the defaults when none is given
         self.information_scale = graph.information_scale if information_scale is None else information_scale
         self.min_sigmas = graph.min_sigmas if min_sigmas is None else np.asarray(min_sigmas, dtype=float)
+        self.information = graph.information if information is None else information
         # the score needs normals: point-to-point ICP is scored on clouds prepared for point-to-plane
         self.surface_metric = metric if metric != "point-to-point" else "point-to-plane"
         self._prepared: OrderedDict = OrderedDict()  # id(points) -> (points, IcpCloud), least recently used first
@@ -84,6 +86,7 @@ class IcpService:
         return cls(
             information_scale=pose_graph.information_scale,
             min_sigmas=pose_graph.min_sigmas,
+            information=pose_graph.information,
             metric=registration.metric,
             inlier_distance=registration.inlier_distance,
             tolerance=registration.icp_tolerance,
@@ -126,6 +129,7 @@ class IcpService:
             max_iterations=cap,
             tolerance=self.tolerance,
             backend=self.backend,
+            information=self.information,
         )
         return _icp.IcpResult(fit.T_fixed_moving, fit.rmse, self.calibrated(fit.information))
 

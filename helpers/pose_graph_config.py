@@ -28,6 +28,7 @@ from .limits import (
 )
 
 GRAPH_WEIGHTS = ("hessian", "icp", "identity")
+INFORMATION_SOURCES = ("gicp", "plane")
 LOOP_KERNELS = ("none", "huber", "cauchy")
 
 
@@ -43,7 +44,11 @@ class PoseGraphConfig(BoundedTable):
     The hessian weights (ours, one value away) give each edge its own: the
     information of the registration that measured it, calibrated on flights
     whose truth is known (``benchmarks/bench_information.py``), so a step over
-    flat ground says how little it knows along the track.
+    flat ground says how little it knows along the track. That information is
+    generalized ICP's own Hessian (``information = "gicp"``) or the
+    point-to-plane Hessian of the same final pairs (``"plane"``): the plane
+    covariances of generalized ICP keep a little weight along a flat ground,
+    so its Hessian stays sure of a slide the plane one shows as loose.
     """
 
     TABLE: ClassVar[str] = "pose_graph"
@@ -61,6 +66,11 @@ class PoseGraphConfig(BoundedTable):
     )
     edge_sigma_m: float = param(0.1, "icp weights: an edge's translation sigma per step spanned, metres")
     edge_sigma_deg: float = param(0.3, "icp weights: an edge's rotation sigma per step spanned, degrees")
+    information: str = param(
+        "gicp",
+        "what an edge's information is measured from: gicp (small_gicp's Hessian of its cost) or plane "
+        "(point-to-plane of the final pairs, which sees a slide along flat ground)",
+    )
     information_scale: float = param(
         0.35, "hessian weights: ICP's information (Hessian over residual variance) is multiplied by this"
     )
@@ -87,6 +97,7 @@ class PoseGraphConfig(BoundedTable):
         self._one_of("graph_weights", GRAPH_WEIGHTS)
         self._between("edge_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("edge_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")
+        self._one_of("information", INFORMATION_SOURCES)
         self._between("information_scale", MIN_SIGMA, 1.0, "a positive fraction (ICP is never surer than its Hessian)")
         self._between("min_sigma_m", MIN_SIGMA, MAX_LENGTH, "a positive number of metres")
         self._between("min_sigma_deg", MIN_SIGMA, 180.0, "a positive number of degrees")

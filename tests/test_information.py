@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from helpers.config import Config
+from helpers.errors import SlamError
 from helpers.factors import Edge
 from helpers.geometry import transform_points
 from helpers.icp import icp_cloud, refine_icp
@@ -173,3 +174,58 @@ def test_the_icp_service_hands_out_calibrated_information():
     assert np.allclose(fit.information, calibrated(raw.information, 0.2, run.min_sigmas))
     sigmas = np.sqrt(np.diag(np.linalg.inv(fit.information)))
     assert sigmas[:3].min() >= 0.01 and np.degrees(sigmas[3:]).min() >= 0.02
+
+
+def _gentle(n=6000, seed=0):
+    """Nearly flat ground: 5 cm of relief over 40 m (slopes under a degree), 2 cm of noise."""
+    rng = np.random.default_rng(seed)
+    xy = rng.uniform(-20, 20, (n, 2))
+    z = 0.05 * np.sin(xy[:, 0] / 5) + 0.05 * np.cos(xy[:, 1] / 4)
+    return np.column_stack([xy, z + rng.normal(0, 0.02, n)])
+
+
+def test_the_plane_source_is_the_point_to_plane_sum_of_the_final_pairs():
+    """With information="plane" small_gicp's result carries the point-to-plane information of its own
+    final pairs: what plane_information gives at the transform it returns (Open3D's always)."""
+    fixed = icp_cloud(_hills(seed=14), "plane-to-plane", "small_gicp")
+    moving = icp_cloud(
+        transform_points(_hills(seed=15), np.linalg.inv(_transform(1.0, [0.3, -0.2, 0.0]))),
+        "plane-to-plane",
+        "small_gicp",
+    )
+    kw = {"metric": "plane-to-plane", "backend": "small_gicp", **ICP}
+    result = refine_icp(moving, fixed, np.eye(4), information="plane", **kw)
+    expected = plane_information(
+        moving.points, fixed.points, fixed.normals, result.T_fixed_moving, ICP["inlier_distance"], fixed.nearest
+    )
+    assert np.allclose(result.information, expected, rtol=1e-9)
+    assert not np.allclose(result.information, refine_icp(moving, fixed, np.eye(4), **kw).information, rtol=0.1)
+
+
+def test_over_nearly_flat_ground_the_plane_source_knows_it_does_not_know():
+    """Generalized ICP's plane covariances keep a little weight along the ground, so its Hessian stays
+    sure of the along-ground position that slopes under a degree barely pin; the point-to-plane
+    information of the same pairs is several times looser there, and as sure of height and tilt."""
+    fixed, moving = _gentle(seed=1), _gentle(seed=2)
+    kw = {"metric": "plane-to-plane", "backend": "small_gicp", **ICP}
+    gicp, plane = (
+        np.sqrt(np.diag(np.linalg.inv(refine_icp(moving, fixed, np.eye(4), information=s, **kw).information)))
+        for s in ("gicp", "plane")
+    )
+    assert np.all(plane[:2] > 2 * gicp[:2])  # x, y: loose
+    assert np.allclose(plane[2:5], gicp[2:5], rtol=0.25)  # z, roll, pitch: pinned alike
+
+
+def test_an_unknown_information_source_is_refused():
+    with pytest.raises(SlamError, match="information"):
+        Config().with_values(pose_graph={"information": "lidar"})
+    with pytest.raises(SlamError, match="information source"):
+        refine_icp(
+            _hills(seed=16),
+            _hills(seed=17),
+            np.eye(4),
+            metric="plane-to-plane",
+            backend="small_gicp",
+            information="lidar",
+            **ICP,
+        )
