@@ -6,8 +6,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
 
+from .registration_figures import scale_bar
 from .render import pyvista
-from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, xy_of
+from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, xy_of
 
 
 def submap_panels(
@@ -61,27 +62,68 @@ def submap_panels(
     return image
 
 
-def submap_centres_figure(ground_truth, odometry, centres, scan_points=None, label_every: int = 10):
+def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_points=None, zoom_m: float = 30.0):
     """Top view: the odometry trajectory (red) and the ground truth (green),
-    one dot per submap centre (its id every ``label_every``), over the
-    submap points in light grey when given."""
-    gt, odo, c = xy_of(ground_truth), xy_of(odometry), xy_of(centres)
+    one dot per submap centre, over the map in grey when given; an inset
+    zooms on ``zoom_m`` metres around the last centre, with where that
+    submap truly is (``true_centres``): the drift is metres on a loop of
+    hundreds, too small to see at the scale of the whole flight."""
+    gt, odo, c, true = xy_of(ground_truth), xy_of(odometry), xy_of(centres), xy_of(true_centres)
     fig, ax = plt.subplots(figsize=(10, 5.6), constrained_layout=True)
-    if scan_points is not None:
-        low, high = gt.min(axis=0) - 40, gt.max(axis=0) + 40
-        near = np.all((scan_points[:, :2] > low) & (scan_points[:, :2] < high), axis=1)
-        ax.scatter(*scan_points[near, :2].T, s=0.6, color="#c8c8c8", linewidths=0, rasterized=True)
-        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]))
-    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
-    ax.plot(odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.5, label="odometry (the submaps are built on it)")
-    ax.scatter(c[:, 0], c[:, 1], s=22, color="black", zorder=3, label=f"submap centres ({len(c)})")
-    for k in range(0, len(c), label_every):
-        ax.annotate(str(k), c[k], xytext=(5, 5), textcoords="offset points", fontsize=9)
-    ax.plot(*gt[0], "o", color="black", ms=9, mfc="none", mew=2, label="start")
+
+    def draw(axis, dot=22):
+        if map_points is not None:
+            axis.scatter(*map_points[:, :2].T, s=0.8, color="#a9a9a9", linewidths=0, rasterized=True)
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+        axis.plot(
+            odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.5, label="odometry (the submaps are built on it)"
+        )
+        axis.scatter(c[:, 0], c[:, 1], s=dot, color="black", zorder=3, label=f"submap centres ({len(c)})")
+        axis.scatter(
+            *true.T,
+            s=dot,
+            color="white",
+            edgecolor=COLORS["ground_truth"],
+            lw=1.5,
+            zorder=3,
+            label="where each submap's middle scan truly was",
+        )
+
+    draw(ax)
+    low, high = gt.min(axis=0) - 40, gt.max(axis=0) + 40
+    ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]))
+    ax.annotate(
+        "submap 0",
+        c[0],
+        xytext=(-12, 12),
+        textcoords="offset points",
+        fontsize=9,
+        ha="right",
+        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
+    )
+    ax.annotate(
+        f"submap {len(c) - 1}",
+        c[-1],
+        xytext=(12, -14),
+        textcoords="offset points",
+        fontsize=9,
+        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
+    )
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="submap centres along the flight, seen from above")
     grid(ax)
-    ax.legend(loc="center", fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    x, y = c[-1]
+    window = (x - zoom_m / 2, x + zoom_m / 2, y - zoom_m / 2, y + zoom_m / 2)
+    inset_zoom(ax, lambda axis: (draw(axis, 60), scale_bar(axis, zoom_m / 5)), window, (0.3, 0.28, 0.4, 0.44))
     return fig
+
+
+def heading_change_deg(poses, submaps) -> np.ndarray:
+    """How far the drone turned across each submap (degrees): the change of
+    heading of ``poses`` from the submap's first scan to its last."""
+    poses = np.asarray(poses)
+    yaw = np.degrees(np.arctan2(poses[:, 1, 0], poses[:, 0, 0]))
+    return np.array([abs((yaw[s.scan_ids[-1]] - yaw[s.scan_ids[0]] + 180) % 360 - 180) for s in submaps])
 
 
 def recent_rule_figure(centres, position, n_excluded: int, radius: float, title: str, base_radius: float | None = None):
