@@ -325,8 +325,8 @@ def test_the_pose_graph_formulas_are_typeset(book, browser):
 
 
 def test_a_display_formula_inside_a_list_item_is_typeset(book, browser):
-    """Chapter 3's relative pose error, a display formula in its own paragraph of a bullet."""
-    browser.open((book.parent / "03_registration.html").resolve().as_uri())
+    """Chapter 4's relative pose error, a display formula in its own paragraph of a bullet."""
+    browser.open((book.parent / "04_submaps.html").resolve().as_uri())
     browser.evaluate(MATHJAX_DONE)
     found = browser.evaluate("""[...document.querySelectorAll('article li')]
       .filter(item => [...item.querySelectorAll('script[type^="math/tex"]')].some(s => s.text.includes('E_i =')))
