@@ -1,12 +1,14 @@
-"""Figures for notebook 4: the submaps, their centres and the cost of a query."""
+"""Figures for notebook 4: the odometry over the whole flight and its errors, then the
+submaps, their centres and the cost of a query."""
 
 from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from .registration_figures import scale_bar
+from .parameter_figures import MATCH_COLORS
 from .render import pyvista
 from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, xy_of
 
@@ -194,3 +196,80 @@ def submap_merge_figure(scans_worth, turn_deg, n_scans_per_submap: int, turn_lim
     grid(ax)
     ax.legend(fontsize=9, loc="center right", bbox_to_anchor=(1.0, 0.62))
     return fig
+
+
+def trajectory_figure(
+    ground_truth, estimated, label="odometry", extra=None, zoom_m=None, inset_at=(0.3, 0.3, 0.36, 0.42)
+):
+    """Top view of a ground-truth and an estimated trajectory ((N, 4, 4) poses or (N, 2+) positions).
+
+    With ``zoom_m``, an inset shows a square of that many metres around the
+    two ends, with a scale bar: metres of drift on a loop of hundreds of
+    metres are invisible at the scale of the whole flight."""
+    gt, est = xy_of(ground_truth), xy_of(estimated)
+    color = COLORS["odometry"] if label == "odometry" else COLORS["optimized"]
+    fig, ax = plt.subplots(figsize=(9, 5.4), constrained_layout=True)
+
+    def draw(axis, marker_size=6):
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+        axis.plot(est[:, 0], est[:, 1], color=color, lw=1.8, label=label)
+        for points, extra_color, name in extra or ():
+            axis.plot(points[:, 0], points[:, 1], color=extra_color, lw=1.8, label=name)
+        axis.plot(*est[-1], "s", color=color, ms=marker_size, label=f"end, {label}")
+        axis.plot(*gt[-1], "s", color=COLORS["ground_truth"], ms=marker_size, label="end, ground truth")
+
+    draw(ax)
+    ax.plot(*gt[0], "o", color="black", ms=7, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="trajectory seen from above")
+    grid(ax, color="#e5e5e5", open_frame=True)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    if zoom_m:
+        centre = (gt[-1] + est[-1]) / 2
+        window = (centre[0] - zoom_m / 2, centre[0] + zoom_m / 2, centre[1] - zoom_m / 2, centre[1] + zoom_m / 2)
+        inset_zoom(ax, lambda axis: (draw(axis, 8), scale_bar(axis, zoom_m / 4)), window, inset_at)
+    return fig
+
+
+def scale_bar(ax, metres: float, where: str = "lower right") -> None:
+    """A bar of ``metres`` with its length written under it, for views without ticks."""
+    bar = AnchoredSizeBar(
+        ax.transData, metres, f"{metres:g} m", where, pad=0.4, frameon=False, size_vertical=metres / 20, color="black"
+    )
+    ax.add_artist(bar)
+
+
+def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, position_m, turning=None):
+    """The odometry step by step: the error of every scan-to-scan motion
+    (translation, rotation), the MSAC inliers behind it, and the position
+    error they add up to. ``turning`` (one bool per step) shades the turns."""
+    indices = np.asarray(indices)
+    steps = indices[1:]
+    fig, axes = plt.subplots(4, 1, figsize=(10, 8.6), sharex=True, constrained_layout=True)
+    panels = (
+        (steps, translation_cm, "translation error (cm)", "error of each scan-to-scan motion"),
+        (steps, rotation_deg, "rotation error (deg)", None),
+        (steps, n_inliers, "MSAC inliers", None),
+    )
+    for ax, (x, y, label, title) in zip(axes, panels, strict=False):
+        ax.plot(x, y, ".-", color=COLORS["odometry"], lw=0.8, ms=4)
+        ax.set(ylabel=label, title=title, ylim=(0, None))
+    axes[2].lines[0].set_color(MATCH_COLORS["inlier"])
+    axes[3].plot(indices, position_m, color=COLORS["odometry"], lw=2)
+    axes[3].set(
+        ylabel="position error (m)", xlabel="scan index", title="drift: distance to the true position", ylim=(0, None)
+    )
+    for ax in axes:
+        grid(ax, color="#e5e5e5", open_frame=True)
+        if turning is not None:
+            _shade(ax, steps, np.asarray(turning, bool))
+    if turning is not None:
+        axes[0].fill_between([], [], color="#f3c623", alpha=0.25, label="turning")
+        axes[0].legend(loc="upper right", fontsize=9)
+    return fig
+
+
+def _shade(ax, x, mask):
+    """Shade the runs of ``x`` where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)
