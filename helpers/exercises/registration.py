@@ -69,5 +69,5 @@ def check_least_share(w_least, max_trials: int, confidence: float, w_pair: float
     verdict = ""
     if w_pair is not None:
         enough = w_pair >= truth
-        verdict = f"; this pair's w = {w_pair:.3f} is {'above' if enough else 'below'} it"
+        verdict = f"; this pair's measured w is {'above' if enough else 'below'} it"
     return say(True, f"{max_trials} trials reach {confidence:g} confidence from w = {truth:.3f} up{verdict}", "")
