@@ -355,7 +355,8 @@ def test_code_cells_have_a_copy_button_from_the_books_own_script(book, browser):
     browser.open(page.resolve().as_uri())
     cells = browser.evaluate("""[...document.querySelectorAll('div.cell_input')].map(cell => {
       const button = cell.querySelector('button.copybtn');
-      return button ? document.querySelector(button.dataset.clipboardTarget).innerText : null;
+      const target = button && document.querySelector(button.dataset.clipboardTarget);
+      return button ? target.innerText || target.textContent : null;  // a folded cell's code is hidden
     })""")
     code = [cell.source for cell in nbformat.read(site_module.NOTEBOOKS / page.with_suffix(".ipynb").name, 4).cells
             if cell.cell_type == "code"]  # fmt: skip
