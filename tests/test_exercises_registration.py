@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from helpers.exercises.registration import check_rotation_angle, check_trials, trials_for
+from helpers.exercises.registration import check_least_share, check_rotation_angle
 
 
 def _angle_deg(T):
@@ -18,27 +18,17 @@ def test_rotation_angle(capsys):
     assert [line.split(":")[0] for line in lines] == ["correct"] + ["not yet"] * 3
 
 
-def _matches(inlier_share=0.4, count=300, seed=0):
-    """Matched points: a share of them moved by a known motion, the rest anywhere."""
-    rng = np.random.default_rng(seed)
-    moving = rng.uniform(-50, 50, (count, 3))
-    T = np.eye(4)
-    angle = np.radians(5.0)
-    T[:2, :2] = [[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]]
-    T[:3, 3] = [6.0, 0.5, 0.1]
-    fixed = moving @ T[:3, :3].T + T[:3, 3]
-    wrong = rng.random(count) >= inlier_share
-    fixed[wrong] = rng.uniform(-50, 50, (wrong.sum(), 3))
-    return moving, fixed, T
-
-
-def test_trials(capsys):
-    moving, fixed, T = _matches()
-    w = np.mean(np.linalg.norm(moving @ T[:3, :3].T + T[:3, 3] - fixed, axis=1) < 1.0)
-    right = trials_for(w, 0.999)
-    check_trials(right, moving, fixed, T, 1.0)
-    check_trials(2 * right, moving, fixed, T, 1.0)
-    check_trials(trials_for(w, 0.99), moving, fixed, T, 1.0)  # the wrong confidence
-    check_trials(None, moving, fixed, T, 1.0)
+def test_least_share(capsys):
+    w = least_share = (1 - 0.01 ** (1 / 3000)) ** (1 / 3)  # (1 - w^3)^3000 = 1 - 0.99
+    assert abs((1 - least_share**3) ** 3000 - 0.01) < 1e-12
+    check_least_share(w, 3000, 0.99, w_pair=0.104)
+    check_least_share(w, 3000, 0.99)
+    check_least_share(w**3, 3000, 0.99)  # the share of all-correct samples, not of matches
+    check_least_share((1 - 0.001 ** (1 / 3000)) ** (1 / 3), 3000, 0.99)  # the wrong confidence
+    check_least_share(100 * w, 3000, 0.99)  # a percentage
+    check_least_share(None, 3000, 0.99)
+    check_least_share("a lot", 3000, 0.99)
     lines = capsys.readouterr().out.splitlines()
-    assert [line.split(":")[0] for line in lines] == ["correct"] + ["not yet"] * 3
+    assert [line.split(":")[0] for line in lines] == ["correct"] * 2 + ["not yet"] * 5
+    assert "below it" in lines[0] and "0.115" in lines[0]
+    assert "0 and 1" in lines[4]

@@ -325,8 +325,8 @@ def test_the_pose_graph_formulas_are_typeset(book, browser):
 
 
 def test_a_display_formula_inside_a_list_item_is_typeset(book, browser):
-    """Chapter 3's relative pose error, a display formula in its own paragraph of a bullet."""
-    browser.open((book.parent / "03_registration.html").resolve().as_uri())
+    """Chapter 4's relative pose error, a display formula in its own paragraph of a bullet."""
+    browser.open((book.parent / "04_submaps.html").resolve().as_uri())
     browser.evaluate(MATHJAX_DONE)
     found = browser.evaluate("""[...document.querySelectorAll('article li')]
       .filter(item => [...item.querySelectorAll('script[type^="math/tex"]')].some(s => s.text.includes('E_i =')))
@@ -355,7 +355,8 @@ def test_code_cells_have_a_copy_button_from_the_books_own_script(book, browser):
     browser.open(page.resolve().as_uri())
     cells = browser.evaluate("""[...document.querySelectorAll('div.cell_input')].map(cell => {
       const button = cell.querySelector('button.copybtn');
-      return button ? document.querySelector(button.dataset.clipboardTarget).innerText : null;
+      const target = button && document.querySelector(button.dataset.clipboardTarget);
+      return button ? target.innerText || target.textContent : null;  // a folded cell's code is hidden
     })""")
     code = [cell.source for cell in nbformat.read(site_module.NOTEBOOKS / page.with_suffix(".ipynb").name, 4).cells
             if cell.cell_type == "code"]  # fmt: skip

@@ -6,12 +6,9 @@ import math
 
 import numpy as np
 
-from ..errors import SlamError
 from ..geometry import rotation_angle_deg
-from ..registration import SAMPLE_SIZE, estimate_rigid_msac
+from ..registration import SAMPLE_SIZE
 from . import say, unanswered
-
-SUCCESS_M = 3.0  # a robust fit within this many metres of the truth leaves ICP an easy job (notebook 3)
 
 
 def _rotations(count: int, seed: int = 0) -> np.ndarray:
@@ -48,35 +45,29 @@ def check_rotation_angle(angle_deg, count: int = 20, tolerance: float = 1e-4) ->
     return say(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
 
 
-def trials_for(w: float, confidence: float) -> int:
-    """Samples of 3 needed to draw at least one all-inlier sample with ``confidence``."""
-    return math.ceil(math.log(1 - confidence) / math.log(1 - w**SAMPLE_SIZE))
+def _least_share(max_trials: int, confidence: float) -> float:
+    """The smallest share of correct matches ``w`` for which ``max_trials``
+    samples of 3 hold an all-correct one with ``confidence``."""
+    return (1 - (1 - confidence) ** (1 / max_trials)) ** (1 / SAMPLE_SIZE)
 
 
-def check_trials(
-    n_trials, moving, fixed, T_true, max_distance: float, confidence: float = 0.999, seeds: int = 10
-) -> None:
-    """Exercise 3.2: the trials the formula asks for, for the share of matches
-    (``moving[i]`` to ``fixed[i]``) that ``T_true`` carries within
-    ``max_distance``, and whether MSAC capped there finds the motion."""
-    if unanswered(n_trials):
-        return say(False, "", "set `n_trials` from the formula, then run this cell again")
-    residual = np.linalg.norm(moving @ T_true[:3, :3].T + T_true[:3, 3] - fixed, axis=1)
-    w = float(np.mean(residual < max_distance))
-    expected = trials_for(w, confidence)
-    if abs(int(n_trials) - expected) > max(1, 0.01 * expected):
-        return say(False, "", f"with w = {w:.3f} and p = {confidence} the formula gives another number: check w^3")
-    hits = 0
-    for seed in range(seeds):
-        try:
-            T, _ = estimate_rigid_msac(moving, fixed, max_distance, int(n_trials), seed, confidence)
-            hits += np.linalg.norm(T[:3, 3] - T_true[:3, 3]) < SUCCESS_M
-        except SlamError:
-            pass
-    ok = hits >= seeds - 1
-    return say(
-        ok,
-        f"the formula's trials; capped there, MSAC lands within {SUCCESS_M:g} m "
-        f"on at least {seeds - 1} of {seeds} seeds",
-        f"the formula's trials, yet MSAC landed within {SUCCESS_M:g} m on only {hits} of {seeds} seeds",
-    )
+def check_least_share(w_least, max_trials: int, confidence: float, w_pair: float | None = None) -> None:
+    """Exercise 3.2: the least share of correct matches for which a cap of
+    ``max_trials`` samples still gives ``confidence``; ``w_pair``, when
+    given, is a pair's measured share, compared with it."""
+    if unanswered(w_least):
+        return say(False, "", "set `w_least` (a share between 0 and 1), then run this cell again")
+    truth = _least_share(max_trials, confidence)
+    try:
+        answer = float(w_least)
+    except (TypeError, ValueError):
+        return say(False, "", "`w_least` is one number, a share between 0 and 1")
+    if not abs(answer - truth) <= 1e-3 * truth:
+        if answer > 1:
+            return say(False, "", "a share lies between 0 and 1 (0.25, not 25 %)")
+        return say(False, "", f"with that w, {max_trials} samples give another confidence than {confidence}")
+    verdict = ""
+    if w_pair is not None:
+        enough = w_pair >= truth
+        verdict = f"; this pair's measured w is {'above' if enough else 'below'} it"
+    return say(True, f"{max_trials} trials reach {confidence:g} confidence from w = {truth:.3f} up{verdict}", "")

@@ -14,7 +14,7 @@ from .. import loopclosure as loop_rules
 from . import report, unanswered
 
 
-def submap_reach(submap) -> tuple[np.ndarray, float]:
+def _submap_reach(submap) -> tuple[np.ndarray, float]:
     """A submap's centre (its pose's position) and its reach: the largest
     horizontal distance (m) from the centre to one of its points."""
     centre = np.asarray(submap.centre, float)
@@ -26,7 +26,7 @@ def check_centre_and_reach(result, submap_id: int, centre, reach) -> bool:
     if unanswered(centre) or unanswered(reach):
         return report(False, "", "fill in both the centre and the reach")
     submap = result.submaps.submaps[submap_id]
-    true_centre, true_reach = submap_reach(submap)
+    true_centre, true_reach = _submap_reach(submap)
     centre = np.asarray(centre, float).ravel()
     if centre.shape != (3,) or not np.allclose(centre, true_centre, atol=1e-6):
         middle = submap.scan_ids[len(submap.scan_ids) // 2]
@@ -40,7 +40,7 @@ def check_centre_and_reach(result, submap_id: int, centre, reach) -> bool:
     )
 
 
-def eligible_submaps(result, node: int, sub_map_thresh: int) -> np.ndarray:
+def _eligible_submaps(result, node: int, sub_map_thresh: int) -> np.ndarray:
     """The submaps a loop query at ``node`` may search, by the loop closer's
     own rule (:func:`helpers.loopclosure.eligible_submaps`)."""
     built = [s for s in result.submaps.submaps if s.scan_ids[-1] <= node]  # the submaps that exist at ``node``
@@ -52,7 +52,7 @@ def check_eligible(result, node: int, sub_map_thresh: int, eligible) -> bool:
     """Exercise 4.2: the ids of the submaps a query at ``node`` may search, with ``sub_map_thresh``."""
     if unanswered(eligible):
         return report(False, "", "fill in the list of submap ids")
-    truth = eligible_submaps(result, node, sub_map_thresh)
+    truth = _eligible_submaps(result, node, sub_map_thresh)
     answer = np.asarray(sorted(np.asarray(eligible, int).ravel().tolist()), int)
     if answer.shape == truth.shape and np.array_equal(answer, truth):
         if len(truth) == 0:

@@ -1,4 +1,4 @@
-"""The figures of notebooks 2 (parameters) and 3 (registration), under one name."""
+"""The figures of notebooks 2 (parameters), 3 (registration) and 4's odometry, under one name."""
 
 from .parameter_figures import (
     descriptor_distance_figure,
@@ -16,10 +16,9 @@ from .registration_figures import (
     icp_convergence_figure,
     matches_figure,
     profile_figure,
-    step_errors_figure,
     surface_error_figure,
-    trajectory_figure,
 )
+from .submap_figures import step_errors_figure, trajectory_figure
 from .sweep_figures import matching_figure, neighbors_figure, skip_frames_figure, trials_figure
 
 __all__ = [

@@ -7,11 +7,13 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.colors import LogNorm
+from matplotlib.legend_handler import HandlerTuple
+from matplotlib.patches import Rectangle
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from ..geometry import transform_points
 from .parameter_figures import MATCH_COLORS, _grid
-from .style import COLORS, ERROR_CMAP, HEIGHT_CMAP, xy_of
+from .style import COLORS, ERROR_CMAP
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
 HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")
@@ -24,17 +26,34 @@ def _top_view(ax, points, color=None, scalars=None, size=1.5, **kwargs):
     return ax.scatter(points[:, 1], points[:, 0], color=color, s=size, linewidths=0, **kwargs)
 
 
-def clouds_figure(moving, fixed, names=("moving", "fixed")):
-    """The two downsampled clouds from above, one above the other, coloured by height."""
-    low, high = np.percentile(np.concatenate([moving[:, 2], fixed[:, 2]]), [1, 99])
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5.2), sharex=True, constrained_layout=True)
-    for ax, points, name, key in zip(axes, (moving, fixed), names, ("moving", "fixed"), strict=True):
-        art = _top_view(ax, points, scalars=points[:, 2], size=3, cmap=HEIGHT_CMAP, vmin=low, vmax=high)
-        ax.set_title(f"{name}: {len(points)} points", color=COLORS[key], fontweight="bold", loc="left")
-        ax.set(ylabel="x, forward (m)", aspect="equal")
-    axes[-1].set_xlabel("y, to the left of the drone (m)")
-    axes[-1].invert_xaxis()
-    fig.colorbar(art, ax=axes, label="z, sensor frame (m)", shrink=0.8)
+def clouds_figure(moving, fixed, names=("moving", "fixed"), zoom_m: float = 40.0, above_m: float = 3.0):
+    """Both downsampled clouds from above, each in its own sensor frame and
+    overlaid as if the drone had not moved, beside a zoom of ``zoom_m``
+    metres around the fixed scan's highest point near the middle of the
+    strip (a roof). The zoom keeps only the points over ``above_m`` above the
+    ground there (roofs, trees): the same roof shows twice, as far apart as
+    the drone moved."""
+    middle = np.abs(fixed[:, 1]) < 0.5 * np.abs(fixed[:, 1]).max()
+    top = fixed[middle][np.argmax(fixed[middle, 2])].copy()
+    top[0] = np.clip(
+        top[0], fixed[:, 0].min() + zoom_m / 2, fixed[:, 0].max() - zoom_m / 2
+    )  # the zoom inside the strip
+    window = (top[1] + zoom_m / 2, top[1] - zoom_m / 2, top[0] - zoom_m / 2, top[0] + zoom_m / 2)
+    fig, (ax, zoom) = plt.subplots(1, 2, figsize=(11, 3.9), width_ratios=(3.2, 1), constrained_layout=True)
+    for points, name, key in ((fixed, names[1], "fixed"), (moving, names[0], "moving")):
+        _top_view(ax, points, color=COLORS[key], size=1.0, alpha=0.8, label=f"{name}: {len(points)} points")
+        inside = (np.abs(points[:, 1] - top[1]) < zoom_m / 2) & (np.abs(points[:, 0] - top[0]) < zoom_m / 2)
+        ground = np.percentile(points[inside, 2], 20)
+        _top_view(zoom, points[inside & (points[:, 2] > ground + above_m)], color=COLORS[key], size=14, alpha=0.8)
+    for axis in (ax, zoom):
+        axis.set(aspect="equal", ylabel="x, forward (m)")
+        _grid(axis)
+    ax.set(xlabel="y, to the left of the drone (m)", title="the two scans, each in its own frame")
+    ax.invert_xaxis()
+    ax.add_patch(Rectangle((window[1], window[2]), zoom_m, zoom_m, fill=False, edgecolor="black", lw=1.2))
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=2, fontsize=9, markerscale=6, frameon=False)
+    title = f"zoom, {zoom_m:g} m square:\npoints {above_m:g} m above the ground"
+    zoom.set(xlim=window[:2], ylim=window[2:], xlabel="y (m)", title=title)
     return fig
 
 
@@ -48,7 +67,7 @@ def descriptor_figure(descriptors: dict):
     items = list(descriptors.items())
     label, first = items[0]
     colors = np.repeat(HISTOGRAM_COLORS, 11)
-    ax.bar(bins, first, 0.85, color=colors, label=label)
+    bars = ax.bar(bins, first, 0.85, color=colors)
     styles = (("black", "-"), ("#d62728", "--"), ("#555555", ":"))
     for (name, values), (color, ls) in zip(items[1:], styles, strict=False):
         ax.step(bins, values, where="mid", color=color, ls=ls, lw=1.6, label=name)
@@ -68,7 +87,15 @@ def descriptor_figure(descriptors: dict):
     ax.set(xlim=(-0.7, 32.7), xlabel="bin (11 per angle)", ylabel="normalised count")
     ax.set_xticks([0, 5, 10, 11, 16, 21, 22, 27, 32])
     _grid(ax)
-    ax.legend(fontsize=9, loc="upper right")
+    handles, labels = ax.get_legend_handles_labels()
+    one_per_angle = tuple(bars.patches[11 * h] for h in range(3))  # the bars take each histogram's colour
+    ax.legend(
+        [one_per_angle, *handles],
+        [label, *labels],
+        handler_map={tuple: HandlerTuple(ndivide=None, pad=0.2)},
+        fontsize=9,
+        loc="upper right",
+    )
     return fig
 
 
@@ -210,65 +237,3 @@ def icp_convergence_figure(runs: dict):
     axes[2].set_ylim(0, None)
     axes[0].legend(fontsize=9)
     return fig
-
-
-def trajectory_figure(ground_truth, estimated, label="odometry", extra=None):
-    """Top view of a ground-truth and an estimated trajectory ((N, 4, 4) poses or (N, 2+) positions)."""
-    gt, est = xy_of(ground_truth), xy_of(estimated)
-    fig, ax = plt.subplots(figsize=(9, 5.4), constrained_layout=True)
-    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
-    ax.plot(
-        est[:, 0],
-        est[:, 1],
-        color=COLORS["odometry"] if label == "odometry" else COLORS["optimized"],
-        lw=1.8,
-        label=label,
-    )
-    ax.plot(*gt[0], "o", color="black", ms=7, label="start")
-    ax.annotate("end", est[-1], xytext=(8, -4), textcoords="offset points", fontsize=9)
-    ax.annotate("end", gt[-1], xytext=(8, 6), textcoords="offset points", fontsize=9)
-    ax.plot(*est[-1], "s", color=COLORS["odometry"], ms=6)
-    ax.plot(*gt[-1], "s", color=COLORS["ground_truth"], ms=6)
-    for points, color, name in extra or ():
-        ax.plot(points[:, 0], points[:, 1], color=color, lw=1.8, label=name)
-    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="trajectory seen from above")
-    _grid(ax)
-    ax.legend(loc="center", fontsize=9)
-    return fig
-
-
-def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, position_m, turning=None):
-    """The odometry step by step: the error of every scan-to-scan motion
-    (translation, rotation), the MSAC inliers behind it, and the position
-    error they add up to. ``turning`` (one bool per step) shades the turns."""
-    indices = np.asarray(indices)
-    steps = indices[1:]
-    fig, axes = plt.subplots(4, 1, figsize=(10, 8.6), sharex=True, constrained_layout=True)
-    panels = (
-        (steps, translation_cm, "translation error (cm)", "error of each scan-to-scan motion"),
-        (steps, rotation_deg, "rotation error (deg)", None),
-        (steps, n_inliers, "MSAC inliers", None),
-    )
-    for ax, (x, y, label, title) in zip(axes, panels, strict=False):
-        ax.plot(x, y, ".-", color=COLORS["odometry"], lw=0.8, ms=4)
-        ax.set(ylabel=label, title=title, ylim=(0, None))
-    axes[2].lines[0].set_color(MATCH_COLORS["inlier"])
-    axes[3].plot(indices, position_m, color=COLORS["odometry"], lw=2)
-    axes[3].set(
-        ylabel="position error (m)", xlabel="scan index", title="drift: distance to the true position", ylim=(0, None)
-    )
-    for ax in axes:
-        _grid(ax)
-        if turning is not None:
-            _shade(ax, steps, np.asarray(turning, bool))
-    if turning is not None:
-        axes[0].fill_between([], [], color="#f3c623", alpha=0.25, label="turning")
-        axes[0].legend(loc="upper right", fontsize=9)
-    return fig
-
-
-def _shade(ax, x, mask):
-    """Shade the runs of ``x`` where ``mask`` is True."""
-    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)

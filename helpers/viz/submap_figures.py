@@ -1,13 +1,16 @@
-"""Figures for notebook 4: the submaps, their centres and the cost of a query."""
+"""Figures for notebook 4: the odometry over the whole flight and its errors, then the
+submaps, their centres and the cost of a query."""
 
 from __future__ import annotations
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
+from .parameter_figures import MATCH_COLORS
 from .render import pyvista
-from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, xy_of
+from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, xy_of
 
 
 def submap_panels(
@@ -61,27 +64,68 @@ def submap_panels(
     return image
 
 
-def submap_centres_figure(ground_truth, odometry, centres, scan_points=None, label_every: int = 10):
+def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_points=None, zoom_m: float = 30.0):
     """Top view: the odometry trajectory (red) and the ground truth (green),
-    one dot per submap centre (its id every ``label_every``), over the
-    submap points in light grey when given."""
-    gt, odo, c = xy_of(ground_truth), xy_of(odometry), xy_of(centres)
+    one dot per submap centre, over the map in grey when given; an inset
+    zooms on ``zoom_m`` metres around the last centre, with where that
+    submap truly is (``true_centres``): the drift is metres on a loop of
+    hundreds, too small to see at the scale of the whole flight."""
+    gt, odo, c, true = xy_of(ground_truth), xy_of(odometry), xy_of(centres), xy_of(true_centres)
     fig, ax = plt.subplots(figsize=(10, 5.6), constrained_layout=True)
-    if scan_points is not None:
-        low, high = gt.min(axis=0) - 40, gt.max(axis=0) + 40
-        near = np.all((scan_points[:, :2] > low) & (scan_points[:, :2] < high), axis=1)
-        ax.scatter(*scan_points[near, :2].T, s=0.6, color="#c8c8c8", linewidths=0, rasterized=True)
-        ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]))
-    ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
-    ax.plot(odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.5, label="odometry (the submaps are built on it)")
-    ax.scatter(c[:, 0], c[:, 1], s=22, color="black", zorder=3, label=f"submap centres ({len(c)})")
-    for k in range(0, len(c), label_every):
-        ax.annotate(str(k), c[k], xytext=(5, 5), textcoords="offset points", fontsize=9)
-    ax.plot(*gt[0], "o", color="black", ms=9, mfc="none", mew=2, label="start")
+
+    def draw(axis, dot=22):
+        if map_points is not None:
+            axis.scatter(*map_points[:, :2].T, s=0.8, color="#a9a9a9", linewidths=0, rasterized=True)
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+        axis.plot(
+            odo[:, 0], odo[:, 1], color=COLORS["odometry"], lw=1.5, label="odometry (the submaps are built on it)"
+        )
+        axis.scatter(c[:, 0], c[:, 1], s=dot, color="black", zorder=3, label=f"submap centres ({len(c)})")
+        axis.scatter(
+            *true.T,
+            s=dot,
+            color="white",
+            edgecolor=COLORS["ground_truth"],
+            lw=1.5,
+            zorder=3,
+            label="where each submap's middle scan truly was",
+        )
+
+    draw(ax)
+    low, high = gt.min(axis=0) - 40, gt.max(axis=0) + 40
+    ax.set(xlim=(low[0], high[0]), ylim=(low[1], high[1]))
+    ax.annotate(
+        "submap 0",
+        c[0],
+        xytext=(-12, 12),
+        textcoords="offset points",
+        fontsize=9,
+        ha="right",
+        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
+    )
+    ax.annotate(
+        f"submap {len(c) - 1}",
+        c[-1],
+        xytext=(12, -14),
+        textcoords="offset points",
+        fontsize=9,
+        bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
+    )
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="submap centres along the flight, seen from above")
     grid(ax)
-    ax.legend(loc="center", fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    x, y = c[-1]
+    window = (x - zoom_m / 2, x + zoom_m / 2, y - zoom_m / 2, y + zoom_m / 2)
+    inset_zoom(ax, lambda axis: (draw(axis, 60), scale_bar(axis, zoom_m / 5)), window, (0.3, 0.28, 0.4, 0.44))
     return fig
+
+
+def heading_change_deg(poses, submaps) -> np.ndarray:
+    """How far the drone turned across each submap (degrees): the change of
+    heading of ``poses`` from the submap's first scan to its last."""
+    poses = np.asarray(poses)
+    yaw = np.degrees(np.arctan2(poses[:, 1, 0], poses[:, 0, 0]))
+    return np.array([abs((yaw[s.scan_ids[-1]] - yaw[s.scan_ids[0]] + 180) % 360 - 180) for s in submaps])
 
 
 def recent_rule_figure(centres, position, n_excluded: int, radius: float, title: str, base_radius: float | None = None):
@@ -152,3 +196,80 @@ def submap_merge_figure(scans_worth, turn_deg, n_scans_per_submap: int, turn_lim
     grid(ax)
     ax.legend(fontsize=9, loc="center right", bbox_to_anchor=(1.0, 0.62))
     return fig
+
+
+def trajectory_figure(
+    ground_truth, estimated, label="odometry", extra=None, zoom_m=None, inset_at=(0.3, 0.3, 0.36, 0.42)
+):
+    """Top view of a ground-truth and an estimated trajectory ((N, 4, 4) poses or (N, 2+) positions).
+
+    With ``zoom_m``, an inset shows a square of that many metres around the
+    two ends, with a scale bar: metres of drift on a loop of hundreds of
+    metres are invisible at the scale of the whole flight."""
+    gt, est = xy_of(ground_truth), xy_of(estimated)
+    color = COLORS["odometry"] if label == "odometry" else COLORS["optimized"]
+    fig, ax = plt.subplots(figsize=(9, 5.4), constrained_layout=True)
+
+    def draw(axis, marker_size=6):
+        axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
+        axis.plot(est[:, 0], est[:, 1], color=color, lw=1.8, label=label)
+        for points, extra_color, name in extra or ():
+            axis.plot(points[:, 0], points[:, 1], color=extra_color, lw=1.8, label=name)
+        axis.plot(*est[-1], "s", color=color, ms=marker_size, label=f"end, {label}")
+        axis.plot(*gt[-1], "s", color=COLORS["ground_truth"], ms=marker_size, label="end, ground truth")
+
+    draw(ax)
+    ax.plot(*gt[0], "o", color="black", ms=7, label="start")
+    ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="trajectory seen from above")
+    grid(ax, color="#e5e5e5", open_frame=True)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    if zoom_m:
+        centre = (gt[-1] + est[-1]) / 2
+        window = (centre[0] - zoom_m / 2, centre[0] + zoom_m / 2, centre[1] - zoom_m / 2, centre[1] + zoom_m / 2)
+        inset_zoom(ax, lambda axis: (draw(axis, 8), scale_bar(axis, zoom_m / 4)), window, inset_at)
+    return fig
+
+
+def scale_bar(ax, metres: float, where: str = "lower right") -> None:
+    """A bar of ``metres`` with its length written under it, for views without ticks."""
+    bar = AnchoredSizeBar(
+        ax.transData, metres, f"{metres:g} m", where, pad=0.4, frameon=False, size_vertical=metres / 20, color="black"
+    )
+    ax.add_artist(bar)
+
+
+def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, position_m, turning=None):
+    """The odometry step by step: the error of every scan-to-scan motion
+    (translation, rotation), the MSAC inliers behind it, and the position
+    error they add up to. ``turning`` (one bool per step) shades the turns."""
+    indices = np.asarray(indices)
+    steps = indices[1:]
+    fig, axes = plt.subplots(4, 1, figsize=(10, 8.6), sharex=True, constrained_layout=True)
+    panels = (
+        (steps, translation_cm, "translation error (cm)", "error of each scan-to-scan motion"),
+        (steps, rotation_deg, "rotation error (deg)", None),
+        (steps, n_inliers, "MSAC inliers", None),
+    )
+    for ax, (x, y, label, title) in zip(axes, panels, strict=False):
+        ax.plot(x, y, ".-", color=COLORS["odometry"], lw=0.8, ms=4)
+        ax.set(ylabel=label, title=title, ylim=(0, None))
+    axes[2].lines[0].set_color(MATCH_COLORS["inlier"])
+    axes[3].plot(indices, position_m, color=COLORS["odometry"], lw=2)
+    axes[3].set(
+        ylabel="position error (m)", xlabel="scan index", title="drift: distance to the true position", ylim=(0, None)
+    )
+    for ax in axes:
+        grid(ax, color="#e5e5e5", open_frame=True)
+        if turning is not None:
+            _shade(ax, steps, np.asarray(turning, bool))
+    if turning is not None:
+        axes[0].fill_between([], [], color="#f3c623", alpha=0.25, label="turning")
+        axes[0].legend(loc="upper right", fontsize=9)
+    return fig
+
+
+def _shade(ax, x, mask):
+    """Shade the runs of ``x`` where ``mask`` is True."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(int), 0]))
+    for start, stop in zip(edges[::2], edges[1::2], strict=True):
+        ax.axvspan(x[start] - 1.5, x[stop - 1] + 1.5, color="#f3c623", alpha=0.25, lw=0)
