@@ -38,15 +38,14 @@ def comparison_rows(runs: dict) -> list[tuple[str, str, dict]]:
     return [(measure, unit_of[measure], {n: f[measure] for n, f in figures.items()}) for measure in first]
 
 
-def format_comparison(rows, digits: int = 2) -> str:
-    """The rows of :func:`comparison_rows` as aligned text, one column per run,
-    numbers to ``digits`` significant figures (counts whole)."""
+def comparison_markdown(rows, digits: int = 2) -> str:
+    """The rows of :func:`comparison_rows` as a GitHub-style Markdown table
+    (measure, unit, one column per run), numbers to ``digits`` significant figures (counts whole)."""
     names = list(rows[0][2])
-    width = max(len(measure) for measure, _, _ in rows)
-    lines = [f"{'':<{width}}  {'':<5}" + "".join(f"{name:>11}" for name in names)]
+    lines = ["| measure | unit | " + " | ".join(names) + " |", "|:--|:--|" + "--:|" * len(names)]
     for measure, unit, values in rows:
         shown = [f"{v:d}" if isinstance(v, (int, np.integer)) else f"{v:.{digits}g}" for v in values.values()]
-        lines.append(f"{measure:<{width}}  {unit:<5}" + "".join(f"{s:>11}" for s in shown))
+        lines.append(f"| {measure} | {unit} | " + " | ".join(shown) + " |")
     return "\n".join(lines)
 
 
