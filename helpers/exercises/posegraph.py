@@ -150,8 +150,8 @@ def check_loop_kernel(noise, factors, initial, loops, wrong_edge, true_poses, sl
     no_loops = _optimised_ate(lidar_only, initial, truth)
     if error > clean + slack:
         if abs(error - no_loops) <= slack:
-            return report(False, "", f"ATE {error:.2f} m, as with no loop edge at all ({no_loops:.2f} m): "
-                          "the right loop edges were let go too; at the odometry they are off by the whole drift")  # fmt: skip
+            said = f"ATE {error:.2f} m, as with no loop edge at all ({no_loops:.2f} m): the right loop edges were "
+            return report(False, "", said + "let go too; at the odometry they are off by the whole drift")
         return report(False, "", f"ATE {error:.2f} m against {clean:.2f} m: the wrong edge still bends the trajectory")
     robust = noise.robust() if isinstance(noise, gtsam.noiseModel.Robust) else None
     if isinstance(robust, gtsam.noiseModel.mEstimator.Cauchy):

@@ -18,7 +18,12 @@ ELLIPSE_COLOR = "#b8860b"  # dark goldenrod: a step's uncertainty
 
 
 def runs_figure(
-    ground_truth, runs: dict, title="trajectories from above", end_zoom=None, inset_at=(0.45, 0.3, 0.5, 0.4), colors=None
+    ground_truth,
+    runs: dict,
+    title="trajectories from above",
+    end_zoom=None,
+    inset_at=(0.45, 0.3, 0.5, 0.4),
+    colors=None,
 ):
     """Top view of the truth (green, with its start) and of each run in ``runs``
     (label -> (K, 4, 4) poses), one colour each, ``colors`` or those of :data:`STAGE_COLORS`
