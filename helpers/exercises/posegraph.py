@@ -20,7 +20,7 @@ from ..metrics import ate
 from ..posegraph import PoseGraph, information_from_sigmas
 from . import report, unanswered
 
-NO_ANSWER = "no answer yet: fill in the cell and run it again (a hint is folded under the exercise)"
+NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
 _TRANSLATION_FIRST = np.array([3, 4, 5, 0, 1, 2])  # GTSAM's rotation-first sigmas -> x y z rx ry rz
 
 
@@ -69,13 +69,13 @@ def check_chain(x, steps, loops, sigma_odometry: float, start: float = 0.0) -> b
     x = np.asarray(x, dtype=float).ravel()
     if x.shape != expected.shape:
         return report(False, "", f"x should hold {len(expected)} positions, one per node; got {x.size}")
-    if np.allclose(x, expected, atol=1e-6, rtol=0):
+    if np.allclose(x, expected, atol=1e-4, rtol=0):
         return report(True, "every edge gave way by its variance: the least-squares positions", "")
     for k in range(len(loops)):
-        if np.allclose(x, _chain_least_squares(steps, [loops[k]], sigma_odometry, start), atol=1e-6, rtol=0):
+        if np.allclose(x, _chain_least_squares(steps, [loops[k]], sigma_odometry, start), atol=1e-4, rtol=0):
             return report(False, "", "these positions honour one loop edge only: give every loop edge its row")
     unweighted = [(i, j, measured, sigma_odometry) for i, j, measured, _ in loops]
-    if np.allclose(x, _chain_least_squares(steps, unweighted, sigma_odometry, start), atol=1e-6, rtol=0):
+    if np.allclose(x, _chain_least_squares(steps, unweighted, sigma_odometry, start), atol=1e-4, rtol=0):
         return report(False, "", "the loop edges are weighted like the steps: divide their rows by their own sigma")
     return report(False, "", "not the least-squares positions: one row per edge, each divided by its sigma")
 
@@ -150,10 +150,9 @@ def check_loop_kernel(noise, factors, initial, loops, wrong_edge, true_poses, sl
     no_loops = _optimised_ate(lidar_only, initial, truth)
     if error > clean + slack:
         if abs(error - no_loops) <= slack:
-            said = f"ATE {error:.2f} m, as with no loop edge at all ({no_loops:.2f} m): the right loop edges were "
-            return report(False, "", said + "let go too; at the odometry they are off by the whole drift")
+            return report(False, "", f"ATE {error:.2f} m, as with no loop edge at all: the right ones were let go too")
         return report(False, "", f"ATE {error:.2f} m against {clean:.2f} m: the wrong edge still bends the trajectory")
     robust = noise.robust() if isinstance(noise, gtsam.noiseModel.Robust) else None
     if isinstance(robust, gtsam.noiseModel.mEstimator.Cauchy):
         return report(False, "", "that is the pipeline's Cauchy of notebook 6.6: it works; now find another kernel")
-    return report(True, f"ATE {error:.2f} m, as the graph's own {clean:.2f} m: the wrong edge is outvoted", "")
+    return report(True, f"the wrong edge is outvoted: the ATE stays within {slack:g} m of the graph's own", "")
