@@ -14,7 +14,7 @@ from ..metrics import ate
 from ..registration import kabsch
 from . import report, unanswered
 
-NO_ANSWER = "no answer yet: fill in the cell and run it again (a hint is folded under the exercise)"
+NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
 
 ATE_TOLERANCE_M = 1e-3  # an aligned ATE this close to the check's is right
 MAP_TOLERANCE_M = 1e-6  # a median map error this close to the package's is right
@@ -73,7 +73,7 @@ def check_median_map_error(median_m, estimated_map, ground_truth_map) -> bool:
     median_m = float(median_m)
     errors = map_errors(estimated_map, ground_truth_map)
     if abs(median_m - errors.median) <= MAP_TOLERANCE_M:
-        return report(True, "the median nearest-neighbour distance, as helpers.evaluation.map_errors finds it", hint)
+        return report(True, "the median nearest-neighbour distance, as map_errors finds it", hint)
     if abs(median_m - errors.mean) <= MAP_TOLERANCE_M:
         return report(False, "", "that is the mean distance: take the median")
     return report(False, "", hint)
