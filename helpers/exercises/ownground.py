@@ -17,13 +17,7 @@ import numpy as np
 from ..metrics import ate
 from . import say, unanswered
 
-NO_ANSWER = "no answer yet: fill in the cell and run it again (a hint is folded under the exercise)"
-
-
-def _motion_sigma(spacing: float, speed: float, acceleration: float) -> float:
-    """How much a step (m) may change between consecutive nodes: ``a dt^2``, ``dt = spacing / speed``."""
-    dt = spacing / speed
-    return acceleration * dt**2
+NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
 
 
 def _break_even_speed(spacing: float, acceleration: float, sigma: float) -> float:
@@ -47,7 +41,7 @@ def check_break_even_speed(speed, spacing: float, acceleration: float, along_sig
         return say(False, "", "a dt^2 / 2 is how far a body starting at rest moves; a step changes by a dt^2")
     if not np.isclose(value, expected, rtol=0.02):
         return say(False, "", "not the speed at which the factor's sigma equals the steps' median sigma")
-    say(True, f"{expected:.2g} m/s: faster, the nodes come sooner and the factor is the surer of the two", "")
+    say(True, "faster than that, the nodes come sooner and the motion factor is the surer one", "")
 
 
 def _weak_direction(information) -> tuple[float, float]:
@@ -114,5 +108,9 @@ def check_sparse_fixes(ate_value, every: int, graph, initial, fixes, sigma: floa
             return say(False, "", f"that is the ATE with a fix on every node: keep only every {every}th")
         return say(False, "", hint)
     every_node = _sparse_fixes_ate(1, graph, initial, fixes, sigma, truth)
-    say(True, f"ATE {expected:.2f} m with a fix every {every} nodes, {expected / every_node:.2g} times that of a "
-        f"fix on every node (sqrt({every}) = {np.sqrt(every):.2g})", "")  # fmt: skip
+    ratio = expected / every_node
+    say(
+        True,
+        f"ATE {expected:.2f} m, {ratio:.2g} x that of a fix on every node (sqrt({every}) = {np.sqrt(every):.2g})",
+        "",
+    )

@@ -28,7 +28,7 @@ def runs_figure(
     """Top view of the truth (green, with its start) and of each run in ``runs``
     (label -> (K, 4, 4) poses), one colour each, ``colors`` or those of :data:`STAGE_COLORS`
     in order; ``end_zoom`` = (width, height) metres adds a zoom, with a scale bar, on the
-    truth's last pose, drawn at ``inset_at`` (axes fractions)."""
+    end of the truth, drawn at ``inset_at`` (axes fractions)."""
     gt = xy_of(ground_truth)
     fig, ax = plt.subplots(figsize=(8, 6), constrained_layout=True)
 
@@ -43,8 +43,8 @@ def runs_figure(
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
     ax.legend(fontsize=9, loc="upper left")
-    if end_zoom is not None:
-        x, y = gt[-1]
+    if end_zoom is not None:  # centred on the truth's last few metres, so the tracks run into it
+        x, y = gt[np.linalg.norm(gt - gt[-1], axis=1) <= min(end_zoom) / 2].mean(axis=0)
         window = (x - end_zoom[0] / 2, x + end_zoom[0] / 2, y - end_zoom[1] / 2, y + end_zoom[1] / 2)
         zoom_with_scale(ax, draw, window, inset_at)
     return fig
