@@ -16,9 +16,9 @@ def test_the_rigid_fit_recovers_a_known_motion():
     rng = np.random.default_rng(0)
     points = rng.normal(size=(50, 3)) * [100, 60, 5]
     rotation = Rotation.from_euler("zyx", [30, 2, -1], degrees=True).as_matrix()
-    R, t = exercises.rigid_fit(points, points @ rotation.T + [5, -3, 1])
+    R, t = exercises._rigid_fit(points, points @ rotation.T + [5, -3, 1])
     assert np.allclose(R, rotation) and np.allclose(t, [5, -3, 1])
-    assert exercises.aligned_ate(points, points @ rotation.T + [5, -3, 1]) < 1e-9
+    assert exercises._aligned_ate(points, points @ rotation.T + [5, -3, 1]) < 1e-9
 
 
 def test_the_aligned_ate_check_takes_the_answer_and_refuses_others(capsys):
@@ -26,7 +26,7 @@ def test_the_aligned_ate_check_takes_the_answer_and_refuses_others(capsys):
     truth = np.cumsum(rng.normal(size=(80, 3)), axis=0) * [2, 2, 0.1]
     turn = Rotation.from_euler("z", 1.5, degrees=True).as_matrix()
     estimate = (truth + rng.normal(scale=0.2, size=truth.shape)) @ turn.T + [0.5, 0, 0]
-    right = exercises.aligned_ate(estimate, truth)
+    right = exercises._aligned_ate(estimate, truth)
     assert exercises.check_aligned_ate(right, estimate, truth) and said(capsys) == "correct"
     anchored = ate(_poses(estimate), _poses(truth)).rmse
     assert right < anchored

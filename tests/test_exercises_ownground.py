@@ -12,19 +12,15 @@ def said(capsys):
     return capsys.readouterr().out.split(":")[0]
 
 
-def test_motion_sigma(capsys):
-    along = np.array([0.05, 0.07, 0.09])  # the steps' sigmas along the track, m
-    # 1.5 m at 5 m/s: 0.3 s between nodes; 0.5 m/s² for 0.3 s changes a step by 0.045 m
-    ex.check_motion_sigma(0.045, 1.5, 5.0, 0.5, True, along)
+def test_break_even_speed(capsys):
+    along = np.array([0.05, 0.045, 0.09])  # the steps' sigmas along the track, m: median 0.05
+    # 0.5 m/s² and nodes 1.5 m apart: a (1.5 / v)^2 = 0.05 m at v = 1.5 sqrt(10) = 4.74 m/s
+    ex.check_break_even_speed(1.5 * np.sqrt(10), 1.5, 0.5, along)
     assert said(capsys) == "correct"
-    ex.check_motion_sigma(0.045, 1.5, 5.0, 0.5, True, along / 10)  # steps surer than the factor
-    assert said(capsys) == "not yet"
-    ex.check_motion_sigma(0.045, 1.5, 5.0, 0.5, False, along / 10)
-    assert said(capsys) == "correct"
-    for wrong in (None, 0.15, 0.0225, 0.5, 0.09):  # unanswered, a dt (a speed), a dt^2 / 2, a, twice
-        ex.check_motion_sigma(wrong, 1.5, 5.0, 0.5, True, along)
+    for wrong in (None, 15.0, 1.5 * np.sqrt(5), 4.0):  # unanswered, a dt = sigma, a dt^2 / 2 = sigma, a guess
+        ex.check_break_even_speed(wrong, 1.5, 0.5, along)
         assert said(capsys) == "not yet"
-    ex.check_motion_sigma(0.15, 1.5, 5.0, 0.5, True, along)
+    ex.check_break_even_speed(15.0, 1.5, 0.5, along)
     assert "change of speed" in capsys.readouterr().out
 
 

@@ -10,18 +10,19 @@ STEPS = np.array([10.2, 10.1, 10.3, 10.2, 10.2, 10.3])
 LOOP, SIGMA_ODOMETRY, SIGMA_LOOP = 60.0, 0.1, 0.05
 
 
-def chain_solution(sigma_loop):
+LOOPS = [(0, 6, LOOP, SIGMA_LOOP), (0, 3, 30.0, SIGMA_LOOP)]  # the end of the chain, and its middle
+
+
+def chain_solution(loops):
+    """Weighted least squares written out: one row per edge, divided by its sigma."""
     n = len(STEPS)
     rows, values = [np.eye(n + 1)[0] / 1e-4], [0.0]
-    for k, step in enumerate(STEPS):
+    edges = [(k, k + 1, step, SIGMA_ODOMETRY) for k, step in enumerate(STEPS)] + list(loops)
+    for i, j, measured, sigma in edges:
         row = np.zeros(n + 1)
-        row[k], row[k + 1] = -1, 1
-        rows.append(row / SIGMA_ODOMETRY)
-        values.append(step / SIGMA_ODOMETRY)
-    loop = np.zeros(n + 1)
-    loop[0], loop[-1] = -1, 1
-    rows.append(loop / sigma_loop)
-    values.append(LOOP / sigma_loop)
+        row[i], row[j] = -1, 1
+        rows.append(row / sigma)
+        values.append(measured / sigma)
     return np.linalg.lstsq(np.array(rows), np.array(values), rcond=None)[0]
 
 
@@ -30,11 +31,18 @@ def said(capsys):
 
 
 def test_chain(capsys):
-    assert ex.check_chain(chain_solution(SIGMA_LOOP), STEPS, LOOP, SIGMA_ODOMETRY, SIGMA_LOOP)
+    assert ex.check_chain(chain_solution(LOOPS), STEPS, LOOPS, SIGMA_ODOMETRY)
     assert said(capsys) == "correct"
-    for wrong in (None, np.concatenate([[0], np.cumsum(STEPS)]), chain_solution(SIGMA_ODOMETRY), np.zeros(3)):
-        assert not ex.check_chain(wrong, STEPS, LOOP, SIGMA_ODOMETRY, SIGMA_LOOP)
+    unweighted = [(i, j, z, SIGMA_ODOMETRY) for i, j, z, _ in LOOPS]
+    wrong = (None, np.concatenate([[0], np.cumsum(STEPS)]), chain_solution(LOOPS[:1]), chain_solution(unweighted))
+    for answer in (*wrong, np.zeros(3)):
+        assert not ex.check_chain(answer, STEPS, LOOPS, SIGMA_ODOMETRY)
         assert said(capsys) == "not yet"
+
+
+def test_one_loop_edge_agrees_with_the_closed_form():
+    x = ex._chain_least_squares(STEPS, [(0, 6, LOOP, SIGMA_LOOP)], SIGMA_ODOMETRY)
+    assert np.allclose(x, ex.chain_closed_form(STEPS, LOOP, SIGMA_ODOMETRY, SIGMA_LOOP), atol=1e-6)
 
 
 def test_closed_form_spreads_the_misclosure_evenly():
@@ -100,13 +108,19 @@ def ring():
     return graph, initial, truth, noise
 
 
-def test_wrong_edge_noise(capsys, ring):
+def test_loop_kernel(capsys, ring):
     graph, initial, truth, noise = ring
+    loops = [(19, 0, np.linalg.inv(truth[19]) @ truth[0])]  # the ring's loop edge, its last factor
     wrong_edge = (5, 15, np.eye(4))  # "node 15 is where node 5 is": 100 m off
-    cauchy = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Cauchy.Create(2.3849), noise)
-    assert ex.check_wrong_edge_noise(cauchy, graph, initial, wrong_edge, truth)
+    kernel = gtsam.noiseModel.mEstimator
+    tukey = gtsam.noiseModel.Robust.Create(kernel.Tukey.Create(30.0), noise)
+    assert ex.check_loop_kernel(tukey, graph, initial, loops, wrong_edge, truth)
     assert said(capsys) == "correct"
-    huber = gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(1.345), noise)
-    for answer in (None, noise, gtsam.noiseModel.Isotropic.Sigma(6, 1e6), huber):
-        assert not ex.check_wrong_edge_noise(answer, graph, initial, wrong_edge, truth)
+    cauchy = gtsam.noiseModel.Robust.Create(kernel.Cauchy.Create(2.3849), noise)
+    huber = gtsam.noiseModel.Robust.Create(kernel.Huber.Create(1.345), noise)
+    for answer in (None, noise, huber, cauchy):
+        assert not ex.check_loop_kernel(answer, graph, initial, loops, wrong_edge, truth)
         assert said(capsys) == "not yet"
+    wide = gtsam.noiseModel.Isotropic.Sigma(6, 1e6)  # outvotes the wrong edge, and the right one with it
+    assert not ex.check_loop_kernel(wide, graph, initial, loops, wrong_edge, truth)
+    assert "as with no loop edge" in capsys.readouterr().out

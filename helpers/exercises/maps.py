@@ -1,7 +1,8 @@
 """Checks for the exercises of notebook 7 (map comparison).
 
 Each check computes its own answer from the data (a rigid fit by SVD, the
-package's map error) and prints one line (see :func:`helpers.exercises.report`).
+package's map error; the functions that compute answers are private) and
+prints one line (see :func:`helpers.exercises.report`).
 """
 
 from __future__ import annotations
@@ -13,6 +14,8 @@ from ..metrics import ate
 from ..registration import kabsch
 from . import report, unanswered
 
+NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
+
 ATE_TOLERANCE_M = 1e-3  # an aligned ATE this close to the check's is right
 MAP_TOLERANCE_M = 1e-6  # a median map error this close to the package's is right
 
@@ -23,7 +26,7 @@ def positions(trajectory) -> np.ndarray:
     return trajectory[:, :3, 3] if trajectory.ndim == 3 else trajectory
 
 
-def rigid_fit(moving, fixed) -> tuple[np.ndarray, np.ndarray]:
+def _rigid_fit(moving, fixed) -> tuple[np.ndarray, np.ndarray]:
     """The rotation R and translation t that bring the (N, 3) points ``moving``
     closest to ``fixed`` in the least-squares sense (the package's Kabsch,
     :func:`helpers.registration.kabsch`: by SVD, no scale, never a mirror)."""
@@ -31,28 +34,28 @@ def rigid_fit(moving, fixed) -> tuple[np.ndarray, np.ndarray]:
     return T_fixed_moving[:3, :3], T_fixed_moving[:3, 3]
 
 
-def aligned_ate(estimated, ground_truth) -> float:
+def _aligned_ate(estimated, ground_truth) -> float:
     """ATE RMSE (m) of the estimated positions after the best rigid motion onto the truth."""
     est, gt = positions(estimated), positions(ground_truth)
-    rotation, translation = rigid_fit(est, gt)
+    rotation, translation = _rigid_fit(est, gt)
     return float(np.sqrt(np.mean(np.sum((est @ rotation.T + translation - gt) ** 2, axis=1))))
 
 
 def check_aligned_ate(ate_m, estimated, ground_truth) -> bool:
     """Exercise 7.1: ``ate_m`` is the ATE RMSE after a rigid alignment of ``estimated`` onto ``ground_truth``."""
-    hint = "centre both sets of positions, take the SVD of their 3 x 3 cross-covariance, rotate, then the RMSE"
+    hint = "not the ATE after the best rigid motion: compare your rotation with a known one on a small case"
     if unanswered(ate_m):
-        return report(False, "", hint)
+        return report(False, "", NO_ANSWER)
     ate_m = float(ate_m)
     est, gt = positions(estimated), positions(ground_truth)
-    truth = aligned_ate(est, gt)
+    truth = _aligned_ate(est, gt)
     anchored = ate(_as_poses(est), _as_poses(gt))
     if abs(ate_m - truth) <= ATE_TOLERANCE_M:
         lower = "lower than" if truth < anchored.rmse - ATE_TOLERANCE_M else "the same as"
         return report(True, f"aligned, the ATE is {lower} the anchored one of helpers.metrics.ate", hint)
     if abs(ate_m - anchored.rmse) <= ATE_TOLERANCE_M:
         return report(False, "", "that is the anchored ATE (helpers.metrics.ate): align the trajectories first")
-    rotation, translation = rigid_fit(est, gt)
+    rotation, translation = _rigid_fit(est, gt)
     distances = np.linalg.norm(est @ rotation.T + translation - gt, axis=1)
     if abs(ate_m - distances.mean()) <= ATE_TOLERANCE_M:
         return report(False, "", "that is the mean distance: the ATE is the root of the mean squared distance")
@@ -64,13 +67,13 @@ def check_aligned_ate(ate_m, estimated, ground_truth) -> bool:
 def check_median_map_error(median_m, estimated_map, ground_truth_map) -> bool:
     """Exercise 7.2: ``median_m`` is the median distance from the points of
     ``estimated_map`` to their nearest neighbours in ``ground_truth_map``."""
-    hint = "build a cKDTree over the ground-truth map, query it with the estimated map (k=1), take the median"
+    hint = "not the median distance to the nearest ground-truth point: which cloud did the tree hold?"
     if unanswered(median_m):
-        return report(False, "", hint)
+        return report(False, "", NO_ANSWER)
     median_m = float(median_m)
     errors = map_errors(estimated_map, ground_truth_map)
     if abs(median_m - errors.median) <= MAP_TOLERANCE_M:
-        return report(True, "the median nearest-neighbour distance, as helpers.evaluation.map_errors finds it", hint)
+        return report(True, "the median nearest-neighbour distance, as map_errors finds it", hint)
     if abs(median_m - errors.mean) <= MAP_TOLERANCE_M:
         return report(False, "", "that is the mean distance: take the median")
     return report(False, "", hint)

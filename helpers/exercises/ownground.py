@@ -1,8 +1,8 @@
 """Checks for the exercises of notebook 8 (your own ground).
 
-* :func:`check_motion_sigma`: the translation sigma of a constant-velocity
-  factor from a speed, a node spacing and an acceleration, and whether it is
-  surer along the track than the lidar's steps.
+* :func:`check_break_even_speed`: the ground speed at which a
+  constant-velocity factor is exactly as sure along the track as the
+  lidar's steps.
 * :func:`check_weak_direction`: the horizontal direction an edge's
   information pins least, and its sigma there.
 * :func:`check_sparse_fixes`: the ATE of a graph given a GNSS fix on every
@@ -17,35 +17,31 @@ import numpy as np
 from ..metrics import ate
 from . import say, unanswered
 
-
-def _motion_sigma(spacing: float, speed: float, acceleration: float) -> float:
-    """How much a step (m) may change between consecutive nodes: ``a dt^2``, ``dt = spacing / speed``."""
-    dt = spacing / speed
-    return acceleration * dt**2
+NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
 
 
-def check_motion_sigma(sigma, spacing: float, speed: float, acceleration: float, surer, along_sigmas) -> None:
-    """Exercise 1: ``sigma`` (m) of a constant-velocity factor for nodes
-    ``spacing`` m apart flown at ``speed`` m/s by a drone that accelerates by
-    at most ``acceleration`` m/s²; ``surer``: whether it is below the median of
+def _break_even_speed(spacing: float, acceleration: float, sigma: float) -> float:
+    """The speed (m/s) at which ``a dt^2``, ``dt = spacing / speed``, equals ``sigma`` (m)."""
+    return spacing * np.sqrt(acceleration / sigma)
+
+
+def check_break_even_speed(speed, spacing: float, acceleration: float, along_sigmas) -> None:
+    """Exercise 8.1: ``speed`` (m/s) at which a constant-velocity factor over
+    nodes ``spacing`` m apart, for a drone that accelerates by at most
+    ``acceleration`` m/s², is as sure along the track as the median of
     ``along_sigmas``, the steps' sigmas along the track (m)."""
-    hint = "the time between two nodes is spacing / speed; a step changes by the acceleration times that time squared"
-    if unanswered(sigma) or unanswered(surer):
-        return say(False, "", hint)
-    dt = spacing / speed
-    expected = _motion_sigma(spacing, speed, acceleration)
-    value = float(sigma)
-    if np.isclose(value, acceleration * dt, rtol=0.02):
-        return say(False, "", "that is a change of speed (m/s); the factor compares two steps, in metres: one dt more")
-    if np.isclose(value, 0.5 * acceleration * dt**2, rtol=0.02):
+    if unanswered(speed):
+        return say(False, "", NO_ANSWER)
+    median = float(np.median(along_sigmas))
+    expected = _break_even_speed(spacing, acceleration, median)
+    value = float(speed)
+    if np.isclose(value, acceleration * spacing / median, rtol=0.02):
+        return say(False, "", "that sets a change of speed (a dt, m/s) equal to a length: the factor compares steps")
+    if np.isclose(value, _break_even_speed(spacing, acceleration / 2, median), rtol=0.02):
         return say(False, "", "a dt^2 / 2 is how far a body starting at rest moves; a step changes by a dt^2")
     if not np.isclose(value, expected, rtol=0.02):
-        return say(False, "", hint)
-    median = float(np.median(along_sigmas))
-    if bool(surer) != (expected < median):
-        return say(False, "", f"compare {expected * 100:.2g} cm with the median of the steps' sigmas along the track")
-    word = "surer" if expected < median else "less sure"
-    say(True, f"{expected * 100:.2g} cm, {word} than the lidar's steps along the track ({median * 100:.2g} cm)", "")
+        return say(False, "", "not the speed at which the factor's sigma equals the steps' median sigma")
+    say(True, "faster than that, the nodes come sooner and the motion factor is the surer one", "")
 
 
 def _weak_direction(information) -> tuple[float, float]:
@@ -67,9 +63,9 @@ def check_weak_direction(information, angle_deg, sigma_m) -> None:
     """Exercise 2: the horizontal direction ``information`` (6 x 6,
     translation first) pins least, as an angle from x in degrees, and the
     sigma (m) along it."""
-    hint = "invert the information (6 x 6) into a covariance; its xy block's eigenvector of the largest eigenvalue"
+    hint = "not the direction the step pins least: where does a 6 x 6 information keep its sigmas?"
     if unanswered(angle_deg) or unanswered(sigma_m):
-        return say(False, "", hint)
+        return say(False, "", NO_ANSWER)
     angle, sigma = _weak_direction(information)
     info = np.asarray(information, dtype=float)
     # the 2 x 2 block inverted alone: the rotation taken as known
@@ -102,12 +98,9 @@ def _sparse_fixes_ate(every: int, graph, initial, fixes, sigma: float, truth) ->
 def check_sparse_fixes(ate_value, every: int, graph, initial, fixes, sigma: float, truth) -> None:
     """Exercise 3: ``ate_value`` (m), the ATE of ``graph`` (without GPS factors)
     once a fix of ``fixes`` (sigma ``sigma`` m) is added on every ``every``-th node."""
-    hint = (
-        f"add gtsam.GPSFactor(k, fixes[k], noise) for k in range(0, len(fixes), {every}) to before_gnss, "
-        "optimise from initial and compute ate(poses, truth).rmse"
-    )
+    hint = f"not the ATE with a fix on every {every}th node, from the same graph, fixes and sigma"
     if unanswered(ate_value):
-        return say(False, "", hint)
+        return say(False, "", NO_ANSWER)
     expected = _sparse_fixes_ate(every, graph, initial, fixes, sigma, truth)
     if not np.isclose(float(ate_value), expected, rtol=0.01, atol=0.005):
         every_node = _sparse_fixes_ate(1, graph, initial, fixes, sigma, truth)
@@ -115,5 +108,9 @@ def check_sparse_fixes(ate_value, every: int, graph, initial, fixes, sigma: floa
             return say(False, "", f"that is the ATE with a fix on every node: keep only every {every}th")
         return say(False, "", hint)
     every_node = _sparse_fixes_ate(1, graph, initial, fixes, sigma, truth)
-    say(True, f"ATE {expected:.2f} m with a fix every {every} nodes, {expected / every_node:.2g} times that of a "
-        f"fix on every node (sqrt({every}) = {np.sqrt(every):.2g})", "")  # fmt: skip
+    ratio = expected / every_node
+    say(
+        True,
+        f"ATE {expected:.2f} m, {ratio:.2g} x that of a fix on every node (sqrt({every}) = {np.sqrt(every):.2g})",
+        "",
+    )

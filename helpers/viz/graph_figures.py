@@ -5,8 +5,39 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
+from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
 from .style import COLORS, grid, inset_zoom, segments, xy_of
+
+
+def scale_bar(axis, width_m: float) -> None:
+    """A bar of a round length (1, 2 or 5 times a power of ten metres, about a
+    quarter of ``width_m``) in the lower left corner of a top view, so that a
+    zoom without ticks still shows its scale."""
+    power = 10 ** np.floor(np.log10(width_m / 4))
+    length = max(m * power for m in (1, 2, 5) if m * power <= width_m / 3)
+    label = f"{length:g} m"
+    bar = AnchoredSizeBar(axis.transData, length, label, "lower left", frameon=False, size_vertical=0, pad=0.4)
+    bar.size_bar.get_children()[0].set(linewidth=2.5)
+    axis.add_artist(bar)
+
+
+def zoom_with_scale(ax, draw, window, at) -> None:
+    """:func:`helpers.viz.style.inset_zoom` with a :func:`scale_bar` in the zoom."""
+    inset_zoom(ax, draw, window, at)
+    scale_bar(ax.child_axes[-1], window[1] - window[0])
+
+
+def around_longest_loop(measured, centred, loop_pairs, size, lift: float = 0.0):
+    """(xmin, xmax, ymin, ymax): a window ``size`` = (width, height) metres
+    around the loop edge whose ends lie farthest apart on ``measured`` poses,
+    centred on its middle on ``centred`` poses, raised by ``lift`` metres."""
+    pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
+    a, b = xy_of(measured)[pairs[:, 0]], xy_of(measured)[pairs[:, 1]]
+    longest = pairs[np.argmax(np.linalg.norm(a - b, axis=1))]
+    x, y = xy_of(centred)[longest].mean(axis=0)
+    y += lift
+    return (x - size[0] / 2, x + size[0] / 2, y - size[1] / 2, y + size[1] / 2)
 
 
 def loop_arcs(a, b, bend: float = 0.25, points: int = 24) -> np.ndarray:
@@ -82,11 +113,11 @@ def iterations_figure(errors, lambdas=None, title="Levenberg-Marquardt, step by 
     return fig
 
 
-def pose_graph_figure(poses, loop_pairs, every: int = 1, inset=None, inset_at=(0.42, 0.2, 0.42, 0.6)):
+def pose_graph_figure(poses, loop_pairs, every: int = 1, zoom=(24.0, 18.0), inset_at=(0.42, 0.2, 0.42, 0.6)):
     """The pose graph drawn on its initial (odometry) poses: nodes as dots,
-    odometry edges as a red line, loop edges in orange. ``inset`` =
-    (xmin, xmax, ymin, ymax) adds a zoom on that window, drawn at ``inset_at``
-    (x0, y0, width, height in axes fractions)."""
+    odometry edges as a red line, loop edges in orange. ``zoom`` = (width,
+    height) metres adds a zoom, with a scale bar, around the longest loop edge,
+    drawn at ``inset_at`` (x0, y0, width, height in axes fractions); None: no zoom."""
     xy = xy_of(poses)
     pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
     fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
@@ -104,9 +135,10 @@ def pose_graph_figure(poses, loop_pairs, every: int = 1, inset=None, inset_at=(0
     ax.plot([], [], color=COLORS["loop"], lw=2.2, label=f"loop edges ({len(pairs)})")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="the pose graph on the odometry poses")
     grid(ax)
-    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
-    if inset is not None:
-        inset_zoom(ax, lambda axis: draw(axis, 14), inset, inset_at)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=9)
+    if zoom is not None and len(pairs):
+        window = around_longest_loop(poses, poses, pairs, zoom)
+        zoom_with_scale(ax, lambda axis: draw(axis, 14), window, inset_at)
     return fig
 
 
@@ -142,14 +174,16 @@ def trajectories_figure(
     odometry,
     optimized,
     loop_pairs=(),
-    inset=None,
+    zoom=(50.0, 20.0),
     title="trajectories from above",
     inset_at=(0.42, 0.2, 0.42, 0.6),
 ):
     """Top view of the three trajectories in their colours, loop edges
     drawn on the optimised one, on top, as arcs with dots at both ends (a
-    straight segment would run along the track and hide under it);
-    ``inset`` = (xmin, xmax, ymin, ymax) zooms."""
+    straight segment would run along the track and hide under it).
+    ``zoom`` = (width, height) metres adds a zoom, with a scale bar, around the
+    loop edge longest on the odometry, on the optimised poses (raised a little:
+    room for the arcs above the track); None: no zoom."""
     gt, odo, opt = xy_of(ground_truth), xy_of(odometry), xy_of(optimized)
     pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
     fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
@@ -169,9 +203,10 @@ def trajectories_figure(
     ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
-    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if inset is not None else (0.35, 0.5), fontsize=9)
-    if inset is not None:
-        inset_zoom(ax, draw, inset, inset_at)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=9)
+    if zoom is not None and len(pairs):
+        window = around_longest_loop(odometry, optimized, pairs, zoom, lift=0.15 * zoom[1])
+        zoom_with_scale(ax, draw, window, inset_at)
     return fig
 
 

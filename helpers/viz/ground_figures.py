@@ -8,7 +8,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse
 
-from .style import COLORS, grid, inset_zoom, xy_of
+from .graph_figures import zoom_with_scale
+from .style import COLORS, grid, xy_of
 
 # One colour per run or stage of notebook 8's graph: the shared odometry red and optimised blue first, then
 # colours no other notebook gives a meaning (purple is the reference's run, orange the loop edges).
@@ -17,11 +18,17 @@ ELLIPSE_COLOR = "#b8860b"  # dark goldenrod: a step's uncertainty
 
 
 def runs_figure(
-    ground_truth, runs: dict, title="trajectories from above", inset=None, inset_at=(0.45, 0.3, 0.5, 0.4), colors=None
+    ground_truth,
+    runs: dict,
+    title="trajectories from above",
+    end_zoom=None,
+    inset_at=(0.45, 0.3, 0.5, 0.4),
+    colors=None,
 ):
     """Top view of the truth (green, with its start) and of each run in ``runs``
     (label -> (K, 4, 4) poses), one colour each, ``colors`` or those of :data:`STAGE_COLORS`
-    in order; ``inset`` = (xmin, xmax, ymin, ymax) zooms, drawn at ``inset_at`` (axes fractions)."""
+    in order; ``end_zoom`` = (width, height) metres adds a zoom, with a scale bar, on the
+    end of the truth, drawn at ``inset_at`` (axes fractions)."""
     gt = xy_of(ground_truth)
     fig, ax = plt.subplots(figsize=(8, 6), constrained_layout=True)
 
@@ -36,8 +43,10 @@ def runs_figure(
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
     ax.legend(fontsize=9, loc="upper left")
-    if inset is not None:
-        inset_zoom(ax, draw, inset, inset_at)
+    if end_zoom is not None:  # centred on the truth's last few metres, so the tracks run into it
+        x, y = gt[np.linalg.norm(gt - gt[-1], axis=1) <= min(end_zoom) / 2].mean(axis=0)
+        window = (x - end_zoom[0] / 2, x + end_zoom[0] / 2, y - end_zoom[1] / 2, y + end_zoom[1] / 2)
+        zoom_with_scale(ax, draw, window, inset_at)
     return fig
 
 

@@ -38,16 +38,42 @@ def comparison_rows(runs: dict) -> list[tuple[str, str, dict]]:
     return [(measure, unit_of[measure], {n: f[measure] for n, f in figures.items()}) for measure in first]
 
 
-def format_comparison(rows, digits: int = 2) -> str:
-    """The rows of :func:`comparison_rows` as aligned text, one column per run,
-    numbers to ``digits`` significant figures (counts whole)."""
-    names = list(rows[0][2])
-    width = max(len(measure) for measure, _, _ in rows)
-    lines = [f"{'':<{width}}  {'':<5}" + "".join(f"{name:>11}" for name in names)]
-    for measure, unit, values in rows:
-        shown = [f"{v:d}" if isinstance(v, (int, np.integer)) else f"{v:.{digits}g}" for v in values.values()]
-        lines.append(f"{measure:<{width}}  {unit:<5}" + "".join(f"{s:>11}" for s in shown))
+def error_histograms_figure(maps: dict, top_m: float = 2.0):
+    """One step histogram per map of its points' distances to the truth
+    (``maps``: label -> (errors in m, colour)), on a log count scale, each
+    median dashed; the last bin gathers everything at ``top_m`` and beyond."""
+    fig, ax = plt.subplots(figsize=(8, 3.6), constrained_layout=True)
+    bins = np.linspace(0.0, top_m, 81)
+    for label, (errors, color) in maps.items():
+        errors = np.asarray(errors, float)
+        ax.hist(np.minimum(errors, top_m), bins=bins, histtype="step", lw=1.6, color=color, label=label)
+        ax.axvline(np.median(errors), color=color, ls="--", lw=1)
+    ax.plot([], [], color="black", ls="--", lw=1, label="median (dashed)")
+    xlabel = f"distance to the ground-truth map (m); last bin: {top_m:g} m and more"
+    ax.set(xlabel=xlabel, ylabel="map points", yscale="log")
+    grid(ax)
+    ax.legend(fontsize=9)
+    return fig
+
+
+def markdown_table(header, rows) -> str:
+    """A GitHub-style Markdown table: ``header`` (column titles) and ``rows``
+    (lists of cells, shown as given), the first column left-aligned, the others right."""
+    lines = ["| " + " | ".join(header) + " |", "|:--|" + "--:|" * (len(header) - 1)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
     return "\n".join(lines)
+
+
+def comparison_markdown(rows, digits: int = 2) -> str:
+    """The rows of :func:`comparison_rows` as a :func:`markdown_table` (measure,
+    unit, one column per run), numbers to ``digits`` significant figures (counts whole)."""
+    names = list(rows[0][2])
+
+    def shown(v):
+        return f"{v:d}" if isinstance(v, (int, np.integer)) else f"{v:.{digits}g}"
+
+    body = [[measure, unit, *(shown(v) for v in values.values())] for measure, unit, values in rows]
+    return markdown_table(["measure", "unit", *names], body)
 
 
 def runs_figure(ground_truth, optimized: dict, colors: dict, odometry: dict | None = None, zoom_m: float = 8.0):
