@@ -24,6 +24,7 @@ from helpers.__main__ import main
 from helpers.site import build as site_module
 
 HINT = "<details><summary>Hint</summary>\n\nLook at the **median** of `errors`, and at $x^2$.\n\n</details>"
+TABLE = "| scan | error (m) |\n|---|---|\n| 1 | 0.25 |"
 FIRST = {"caption": "The first picture, **in bold**: what to look at.", "name": "fig-03-first"}
 FOLDED_SOURCE = "# Check: folded\nprint('PRINTED BY A FOLDED CHECK'.lower())"  # its output is not in its source
 FOLDED_OUTPUT = "printed by a folded check"
@@ -63,10 +64,13 @@ def small_book(tmp_path, monkeypatch) -> Path:
         _figure_cell(1, figure=FIRST, image={"alt": "a square of coloured noise"}),
         _figure_cell(2, figure={"caption": "A second picture.", "name": "fig-03-second"}),
         _figure_cell(3),
+        _figure_cell(4, figure={"caption": "A table, a picture, a value.", "name": "fig-03-table"}),
         nbformat.v4.new_markdown_cell(f"## Exercises\n\n### Exercise 3.1: a median\n\nFind it.\n\n{HINT}\n\nNext."),
         _printing_cell(FOLDED_SOURCE, FOLDED_OUTPUT, source_hidden=True, outputs_hidden=True),
         _printing_cell("print('shown' + ' output')", "shown output", source_hidden=True),
     ]
+    table = nbformat.v4.new_output("display_data", data={"text/markdown": TABLE, "text/plain": "a table"})
+    cells[4].outputs = [table, *cells[4].outputs, nbformat.v4.new_output("execute_result", data={"text/plain": "42"})]
     notebook = nbformat.v4.new_notebook(cells=cells, metadata={"language_info": {"name": "python"}})
     nbformat.write(notebook, folder / "03_figures.ipynb")
     answers = nbformat.v4.new_markdown_cell("# 3. Worked answers\n\nBack to [notebook 3](../03_figures.ipynb).")
@@ -75,7 +79,7 @@ def small_book(tmp_path, monkeypatch) -> Path:
     out = tmp_path / "html"
     with redirect_stderr(io.StringIO()) as err:
         assert main(["site", "--out", str(out), "--no-execute"]) == 0, err.getvalue()
-    assert "tags" not in nbformat.read(folder / "03_figures.ipynb", 4).cells[5].metadata  # only the book's copy
+    assert "tags" not in nbformat.read(folder / "03_figures.ipynb", 4).cells[6].metadata  # only the book's copy
     return out
 
 
@@ -87,8 +91,14 @@ def test_figure_cells_become_numbered_figures_with_their_captions_and_alt_text(s
         ("a square of coloured noise", "fig-03-first", "Figure 3.1"),
         ("3. Figures, figure 3.2", "fig-03-second", "Figure 3.2"),  # no alt given: the title and its number
         ("3. Figures, picture 3", None, None),  # no figure metadata: no caption, its place on the page
+        ("3. Figures, figure 3.3", "fig-03-table", "Figure 3.3"),
     ]
     html = page.read_text(encoding="utf-8")
+    figures = re.findall(r"<figure.*?</figure>", html, re.DOTALL)
+    assert len(figures) == 3 and "<table" not in figures[2] and "42" not in figures[2], "a figure holds more"
+    table, figure = html.index("<td><p>0.25</p></td>"), html.index(figures[2])
+    assert table < figure and "42" in html[figure + len(figures[2]) :], "the cell's other outputs lost or moved"
+    assert "the rest of the cell above" not in html
     figure = re.search(r'<figure[^>]*id="fig-03-first".*?</figure>', html, re.DOTALL).group(0)
     assert figure.index("<img") < figure.index("<figcaption"), "the caption is not under the picture"
     assert "<strong>in bold</strong>: what to look at." in figure, "the caption's Markdown is not rendered"

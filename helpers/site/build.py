@@ -7,10 +7,10 @@ the theme's fonts and icons and the code cells' copy button
 (sphinx-copybutton) are its own files, so the book opens from disk with no
 server and no network. Cell tags (``hide-input``, ``hide-cell``,
 ``remove-cell``) and admonitions (```` ```{note} ```` or ``:::{tip}``) work;
-a cell JupyterLab shows folded is folded in the book too. A cell's
-``mystnb: {figure: {caption, name}, image: {alt}}`` metadata makes its output
-a numbered figure with a caption and alt text (``sphinx_ext``); the landing
-page is written by ``landing``, the style by ``book.css``.
+a cell JupyterLab shows folded is folded in the book too (``cells``). A
+cell's ``mystnb: {figure: {caption, name}, image: {alt}}`` metadata makes its
+picture a numbered figure with a caption and alt text (``sphinx_ext``); the
+landing page is written by ``landing``, the style by ``book.css``.
 
 The Sphinx source tree (a generated ``conf.py`` and ``index.md``, copies of
 the notebooks) lives in a temporary folder, so building leaves the checkout
@@ -31,6 +31,7 @@ from unittest import mock
 from .. import outdir
 from ..errors import SlamError
 from ..viz.display import KERNEL_ENVIRONMENT
+from . import cells
 from .landing import RESULT_PICTURE, SOLUTIONS, TITLE, index_page
 
 log = logging.getLogger(__name__)
@@ -151,26 +152,10 @@ def _add_notebook(path: Path, target: Path, execute: bool, sockets: Path) -> Non
     import nbformat
 
     notebook = nbformat.read(path, as_version=4)
-    fold_hidden_cells(notebook)
     if execute:
         _execute(notebook, path, sockets)
+    cells.prepare(notebook)  # folded cells stay folded, a figure cell's other outputs stay out of its figure
     nbformat.write(notebook, target)
-
-
-# What a folded cell of JupyterLab (its metadata ``jupyter.source_hidden`` / ``outputs_hidden``) becomes in the
-# book: myst-nb's tag that folds the same parts behind a toggle (a <details>, no script needed).
-FOLD_TAGS = {(True, True): "hide-cell", (True, False): "hide-input", (False, True): "hide-output"}
-BOOK_TAGS = {"hide-cell", "hide-input", "hide-output", "remove-cell", "remove-input", "remove-output"}
-
-
-def fold_hidden_cells(notebook) -> None:
-    """Tags each code cell JupyterLab shows folded and the book would not, so both fold it the same way."""
-    for cell in notebook.cells:
-        hidden = cell.metadata.get("jupyter", {})
-        fold = FOLD_TAGS.get((bool(hidden.get("source_hidden")), bool(hidden.get("outputs_hidden"))))
-        tags = cell.metadata.get("tags", [])
-        if cell.cell_type == "code" and fold and not BOOK_TAGS.intersection(tags):
-            cell.metadata["tags"] = [*tags, fold]
 
 
 def _execute(notebook, path: Path, sockets: Path) -> None:
