@@ -549,6 +549,25 @@ def test_no_page_scrolls_sideways_on_a_phone(book, browser):
         browser.resize(1300, 900)
 
 
+# Each visible code box: whether it scrolls, and its longest line's length.
+CODE_BOXES = """[...document.querySelectorAll('div.cell_input pre')].filter(p => p.checkVisibility())
+  .map(p => [p.scrollWidth > p.clientWidth + 1, Math.max(...p.innerText.split('\\n').map(l => l.length))])"""
+
+
+def test_a_code_line_of_88_characters_fits_its_box_on_a_laptop_screen(book, browser):
+    """The notebooks keep code lines to 88 characters: on a 1366 px wide screen such a line shows whole,
+    and only a box holding a longer line scrolls."""
+    browser.resize(1366, 800)
+    try:
+        for page in _pages(book)[1:]:
+            browser.open(page.resolve().as_uri())
+            boxes = browser.evaluate(CODE_BOXES)
+            cut = [longest for scrolls, longest in boxes if scrolls and longest <= 88]
+            assert not cut, f"{page.name}: {len(cut)} code boxes scroll with lines of at most {max(cut)} characters"
+    finally:
+        browser.resize(1300, 900)
+
+
 def test_printed_pages_wrap_long_lines_instead_of_cutting_them(book, browser):
     """On paper nothing scrolls: a code line too long for the column wraps inside its box."""
     browser.resize(1300, 900)

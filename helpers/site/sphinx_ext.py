@@ -3,7 +3,8 @@
 - Figures are numbered by chapter: the second captioned figure of notebook 3 is
   "Figure 3.2" (Sphinx alone counts on across the whole book, since our
   toctree is not numbered: the notebooks number their own headings). A worked
-  answers page's figures are "Figure S3.1".
+  answers page's figures are "Figure S3.1"; the landing page's are not
+  numbered.
 - Every picture has a text alternative. A notebook gives one with its cell's
   ``mystnb: {image: {alt: ...}}`` metadata; a picture without one would get
   its file name, a hash, as alt text, so it gets the page's title and its
@@ -42,12 +43,14 @@ def chapter_label(docname: str) -> str | None:
 
 
 def number_figures_by_chapter(app, env) -> list[str]:
-    """Renumbers each page's figures (and tables, code listings) as (chapter, rank on the page)."""
+    """Renumbers each page's figures (and tables, code listings) as (chapter, rank on the page); a page of no
+    chapter (the landing page) shows its captions unnumbered."""
     for docname, by_type in env.toc_fignumbers.items():
         chapter = chapter_label(docname)
-        if chapter is None:
-            continue
         for numbers in by_type.values():
+            if chapter is None:
+                numbers.clear()
+                continue
             in_page_order = sorted(numbers, key=numbers.get)  # Sphinx counted in reading order
             numbers.update({key: (chapter, rank) for rank, key in enumerate(in_page_order, start=1)})
     return []
