@@ -37,9 +37,12 @@ def _png(seed: int) -> str:
     return base64.b64encode(buffer.getvalue()).decode()
 
 
-def _figure_cell(seed: int, **mystnb) -> nbformat.NotebookNode:
+def _figure_cell(seed: int, width: int | None = None, **mystnb) -> nbformat.NotebookNode:
+    """A cell showing a picture; ``width``: shown at that width, as ``show_figure`` shows its pictures."""
     cell = nbformat.v4.new_code_cell(f"draw({seed})", metadata={"mystnb": mystnb} if mystnb else {})
-    cell.outputs = [nbformat.v4.new_output("display_data", data={"image/png": _png(seed), "text/plain": "<Figure>"})]
+    data = {"image/png": _png(seed), "text/plain": "<Figure>"}
+    shown = {"image/png": {"width": width}} if width else {}
+    cell.outputs = [nbformat.v4.new_output("display_data", data=data, metadata=shown)]
     return cell
 
 
@@ -61,7 +64,7 @@ def small_book(tmp_path, monkeypatch) -> Path:
             "# 3. Figures\n\nAfter [notebook 1](01_first.ipynb); "
             "the [worked answers](solutions/03_figures_solutions.ipynb) are in the appendix."
         ),
-        _figure_cell(1, figure=FIRST, image={"alt": "a square of coloured noise"}),
+        _figure_cell(1, width=20, figure=FIRST, image={"alt": "a square of coloured noise"}),
         _figure_cell(2, figure={"caption": "A second picture.", "name": "fig-03-second"}),
         _figure_cell(3),
         _figure_cell(4, figure={"caption": "A table, a picture, a value.", "name": "fig-03-table"}),
@@ -102,6 +105,16 @@ def test_figure_cells_become_numbered_figures_with_their_captions_and_alt_text(s
     figure = re.search(r'<figure[^>]*id="fig-03-first".*?</figure>', html, re.DOTALL).group(0)
     assert figure.index("<img") < figure.index("<figcaption"), "the caption is not under the picture"
     assert "<strong>in bold</strong>: what to look at." in figure, "the caption's Markdown is not rendered"
+
+
+def test_each_picture_links_to_its_own_file_to_be_opened_alone(small_book):
+    """A phone's reader taps a figure to open it whole and zoom: each output picture is a link to its file."""
+    page = small_book / "03_figures.html"
+    html = page.read_text(encoding="utf-8")
+    linked = re.findall(r'<a class="[^"]*image-reference[^"]*" href="([^"]+)"><img [^>]*src="([^"]+)"', html)
+    assert len(linked) == len(_pictures(page)) == 4, f"{len(linked)} linked pictures"
+    assert all(href == src and (page.parent / href).is_file() for href, src in linked), linked
+    assert re.search(r'<img alt="a square of coloured noise"[^>]*width="20"', html), "not shown at its width"
 
 
 def test_relative_links_between_notebooks_become_links_between_pages(small_book):

@@ -10,6 +10,9 @@
   its file name, a hash, as alt text, so it gets the page's title and its
   figure number (or its place on the page) instead. The same holds for a
   picture inside an output's raw HTML, such as the scan player's frame.
+- A picture a cell shows links to its own file, so a phone's reader can open
+  it alone and zoom (Sphinx links a picture shown smaller than drawn, as
+  ``show_figure``'s are; the others are marked so it links them too).
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ ANIMATION = 'id="_anim_img'  # the <img> a matplotlib animation (the scan player
 def setup(app):
     app.connect("env-get-updated", number_figures_by_chapter, priority=900)  # after Sphinx numbered them (500)
     app.connect("doctree-resolved", give_every_picture_alt_text)
+    app.connect("doctree-resolved", link_output_pictures_to_their_files)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
 
 
@@ -83,3 +87,19 @@ def give_every_picture_alt_text(app, doctree, docname: str) -> None:
             alt = html.escape(f"{title}, {what}", quote=True)
             raw.clear()
             raw += nodes.Text(IMG_WITHOUT_ALT.sub(f'<img alt="{alt}"', text))
+
+
+def _in_cell_output(node) -> bool:
+    while node is not None:
+        if "cell_output" in node.get("classes", []):
+            return True
+        node = node.parent
+    return False
+
+
+def link_output_pictures_to_their_files(app, doctree, docname: str) -> None:
+    """Marks a cell's picture with no size of its own as shown at full scale: Sphinx's HTML builder then
+    links it to its file, as it does for the pictures shown smaller than drawn."""
+    for image in doctree.findall(nodes.image):
+        if not any(key in image for key in ("scale", "width", "height")) and _in_cell_output(image):
+            image["scale"] = 100
