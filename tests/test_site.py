@@ -530,13 +530,17 @@ SIDEWAYS = """(() => {
     if (getComputedStyle(a).overflowX !== 'visible') return true; return false; };
   const out = [...document.querySelectorAll('article *')].filter(e => e.getBoundingClientRect().right > width + 1
     && e.checkVisibility() && !scrolls(e)).map(e => e.tagName + ' ' + (e.textContent || '').slice(0, 40));
-  return {page: document.documentElement.scrollWidth, window: width, out: out.slice(0, 5)};
+  const squashed = [...document.querySelectorAll('article img')].filter(i => i.checkVisibility() && i.naturalWidth)
+    .filter(i => { const r = i.getBoundingClientRect(), shape = i.naturalHeight / i.naturalWidth;
+                   return Math.abs(r.height / r.width - shape) > 0.02 * shape; })
+    .map(i => i.alt);
+  return {page: document.documentElement.scrollWidth, window: width, out: out.slice(0, 5), squashed};
 })()"""
 
 
 def test_no_page_scrolls_sideways_on_a_phone(book, browser):
     """At 400 px, long code, printed lines and tables scroll inside their own boxes and long code named in the
-    prose breaks: the page itself is never wider than the window."""
+    prose breaks: the page itself is never wider than the window. Pictures shrink to it in their own shape."""
     browser.resize(400, 800)
     try:
         for page in [*_pages(book), book.parent / "search.html"]:
@@ -545,6 +549,7 @@ def test_no_page_scrolls_sideways_on_a_phone(book, browser):
             state = browser.evaluate(SIDEWAYS)
             assert state["page"] <= state["window"], f"{page.name} scrolls sideways at 400 px: {state}"
             assert not state["out"], f"{page.name}: boxes run off a 400 px window: {state['out']}"
+            assert not state["squashed"], f"{page.name}: pictures out of shape: {state['squashed']}"
     finally:
         browser.resize(1300, 900)
 
