@@ -63,9 +63,9 @@ GOALS = """\
 
 ## Before you start
 
-You need Python (functions, loops, classes used, not written), numpy (arrays, indexing, broadcasting) and
-a little linear algebra (matrix products, rotation matrices, least squares). No lidar or SLAM background
-is assumed: each idea is explained before the cell that uses it.
+You need Python (functions, loops, calling a class's methods), numpy (arrays, indexing, broadcasting)
+and a little linear algebra (matrix products, rotation matrices, least squares). No lidar or SLAM
+background is assumed: each idea is explained before the cell that uses it.
 
 Reading a page and running its cells takes roughly an hour, longer with its exercises; the registration
 and pose-graph pages are the densest. The first notebook that needs the whole SLAM run computes it once,
@@ -78,7 +78,8 @@ These pages are the notebooks as they were last executed. To run them, change th
 1. clone the repository and, on Debian with Python 3.11, run `make setup` (it creates `.venv/` and installs
    the pinned packages), or in an environment of your own run `pip install -r environment.txt` then
    `pip install -e .` in the checkout;
-2. start JupyterLab there: `.venv/bin/jupyter lab notebooks/`, and open the notebooks in order.
+2. start JupyterLab in the checkout (`.venv/bin/jupyter lab notebooks/` after `make setup`; the README says
+   which environment variables keep it quiet and fast) and open the notebooks in order.
 
 The download button at the top of each page gives that page's notebook, but it imports the `helpers`
 package of the repository: run it inside a checkout (or with the package installed), not on its own.
