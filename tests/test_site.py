@@ -534,13 +534,16 @@ SIDEWAYS = """(() => {
     .filter(i => { const r = i.getBoundingClientRect(), shape = i.naturalHeight / i.naturalWidth;
                    return Math.abs(r.height / r.width - shape) > 0.02 * shape; })
     .map(i => i.alt);
-  return {page: document.documentElement.scrollWidth, window: width, out: out.slice(0, 5), squashed};
+  const cut = [...document.querySelectorAll('article button, article input')].filter(e => e.checkVisibility())
+    .filter(e => e.getBoundingClientRect().right > width + 1).map(e => e.title || e.className);
+  return {page: document.documentElement.scrollWidth, window: width, out: out.slice(0, 5), squashed, cut};
 })()"""
 
 
 def test_no_page_scrolls_sideways_on_a_phone(book, browser):
     """At 400 px, long code, printed lines and tables scroll inside their own boxes and long code named in the
-    prose breaks: the page itself is never wider than the window. Pictures shrink to it in their own shape."""
+    prose breaks: the page itself is never wider than the window. Pictures shrink to it in their own shape, and
+    the scan player's buttons stay within reach."""
     browser.resize(400, 800)
     try:
         for page in [*_pages(book), book.parent / "search.html"]:
@@ -550,6 +553,7 @@ def test_no_page_scrolls_sideways_on_a_phone(book, browser):
             assert state["page"] <= state["window"], f"{page.name} scrolls sideways at 400 px: {state}"
             assert not state["out"], f"{page.name}: boxes run off a 400 px window: {state['out']}"
             assert not state["squashed"], f"{page.name}: pictures out of shape: {state['squashed']}"
+            assert not state["cut"], f"{page.name}: controls beyond the window's edge: {state['cut']}"
     finally:
         browser.resize(1300, 900)
 
