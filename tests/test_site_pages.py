@@ -107,6 +107,21 @@ def test_figure_cells_become_numbered_figures_with_their_captions_and_alt_text(s
     assert "<strong>in bold</strong>: what to look at." in figure, "the caption's Markdown is not rendered"
 
 
+def test_two_figures_of_one_name_fail_the_build(tmp_path, monkeypatch):
+    """A link to the name would reach either: the build stops and names the notebook and the name."""
+    folder = tmp_path / "notebooks"
+    folder.mkdir()
+    twice = {"caption": "A picture.", "name": "fig-01-same"}
+    cells = [nbformat.v4.new_markdown_cell("# 1. Twice"), _figure_cell(1, figure=twice), _figure_cell(2, figure=twice)]
+    nbformat.write(nbformat.v4.new_notebook(cells=cells), folder / "01_twice.ipynb")
+    monkeypatch.setattr(site_module, "NOTEBOOKS", folder)
+    with redirect_stderr(io.StringIO()) as err:
+        code = main(["site", "--out", str(tmp_path / "html"), "--no-execute"])
+    said = err.getvalue()
+    assert code == 2 and 'Duplicate explicit target name: "fig-01-same"' in said and "01_twice" in said, said
+    assert not (tmp_path / "html").exists()
+
+
 def test_each_picture_links_to_its_own_file_to_be_opened_alone(small_book):
     """A phone's reader taps a figure to open it whole and zoom: each output picture is a link to its file."""
     page = small_book / "03_figures.html"

@@ -45,7 +45,8 @@ MARKER = ".helpers-site"  # lists what a build wrote: the next one may replace t
 # Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.
 FATAL_WARNINGS = re.compile(
     r"toctree contains reference to nonexisting document|image file not readable|undefined label|"
-    r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]"
+    r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]|"
+    r"Duplicate explicit target name"  # two figures given one name: a link to it would reach either
 )
 
 ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
