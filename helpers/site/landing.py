@@ -23,7 +23,7 @@ SUMMARIES = {
         "one pair of scans through FPFH features, matching, Kabsch, MSAC and ICP, each step checked against the "
         "truth and beside the library call that does it; each parameter swept on the pair"
     ),
-    "04": "from pairs to a trajectory: odometry over the whole flight and its drift, then scans merged into submaps",
+    "04": "odometry over the whole flight, its errors and drift, and tracking; then scans merged into submaps",
     "05": "recognising a place seen before; the reference's main loop written out and checked against the pipeline",
     "06": "one loop edge on a line, the same chain in GTSAM factor by factor, then our graph and a robust kernel",
     "07": "the rebuilt map scored against the truth, and the reference workflow against ours on the same flight",
