@@ -27,6 +27,8 @@ from PIL import Image
 from helpers.__main__ import main
 from helpers.site import build as site_module
 from helpers.site import build_site, notebook_paths, solution_paths
+from helpers.site import sphinx_ext as site_ext
+from helpers.site.landing import summary as page_summary
 
 FRAME = re.compile(r'frames\[\d+\] = "(data:image/[^"]+)"')
 ANIMATION_IMG = "_anim_img"  # id prefix of the <img> a matplotlib animation draws its frames into
@@ -117,6 +119,80 @@ class _Tables(HTMLParser):
             self._cell = None
 
 
+class _Headings(HTMLParser):
+    """Collects the headings of a page's article as (level, text), without their "#" permalinks."""
+
+    def __init__(self):
+        super().__init__()
+        self.headings: list[tuple[int, str]] = []
+        self._level = 0
+        self._text: list[str] = []
+        self._in_link = False
+        self._article = 0
+
+    def handle_starttag(self, tag, attrs):
+        self._article += tag == "article"
+        if self._article and re.fullmatch(r"h[1-6]", tag):
+            self._level, self._text = int(tag[1]), []
+        self._in_link = self._in_link or (tag == "a" and "headerlink" in (dict(attrs).get("class") or ""))
+
+    def handle_data(self, data):
+        if self._level and not self._in_link:
+            self._text.append(data)
+
+    def handle_endtag(self, tag):
+        self._article -= tag == "article" and self._article > 0
+        if tag == "a":
+            self._in_link = False
+        if self._level and tag == f"h{self._level}":
+            self.headings.append((self._level, "".join(self._text).strip()))
+            self._level = 0
+
+
+def _headings(page: Path) -> list[tuple[int, str]]:
+    parser = _Headings()
+    parser.feed(page.read_text(encoding="utf-8"))
+    return parser.headings
+
+
+class _Figures(HTMLParser):
+    """Collects a page's pictures: each <img>'s alt text, the id of the <figure> holding it (None if none)
+    and that figure's caption number ("Figure 3.2"), from the article only."""
+
+    def __init__(self):
+        super().__init__()
+        self.pictures: list[dict] = []
+        self._figures: list[dict] = []  # the open <figure> elements, innermost last
+        self._number: list[str] | None = None
+
+    def handle_starttag(self, tag, attrs):
+        attrs = dict(attrs)
+        if tag == "figure":
+            self._figures.append({"id": attrs.get("id"), "number": ""})
+        elif tag == "span" and "caption-number" in (attrs.get("class") or "") and self._figures:
+            self._number = []
+        elif tag == "img":
+            figure = self._figures[-1] if self._figures else None
+            self.pictures.append({"alt": attrs.get("alt"), "id": attrs.get("id", ""), "figure": figure})
+
+    def handle_data(self, data):
+        if self._number is not None:
+            self._number.append(data)
+
+    def handle_endtag(self, tag):
+        if tag == "span" and self._number is not None:
+            self._figures[-1]["number"] = "".join(self._number).strip()
+            self._number = None
+        elif tag == "figure" and self._figures:
+            self._figures.pop()
+
+
+def _pictures(page: Path) -> list[dict]:
+    parser = _Figures()
+    parser.feed(page.read_text(encoding="utf-8"))
+    return parser.pictures
+
+
 def _local(page: Path, href: str) -> Path | None:
     """The file a relative link of ``page`` points to (None for an in-page anchor)."""
     target = unquote(urlsplit(href).path)
@@ -171,9 +247,14 @@ def test_the_landing_page_shows_the_result_and_every_page_in_order(book):
     pictures = [attrs["src"] for attrs in landing.images if "result" in attrs.get("src", "")]
     assert pictures, "the landing page has no result picture"
     _assert_picture(Image.open(book.parent / pictures[0]), "the landing page's picture")
-    text = book.read_text(encoding="utf-8")
+    text = book.read_text(encoding="utf-8").replace("\u2019", "'")
     for path in notebook_paths():  # each page's line says what it teaches
-        assert site_module._summary(path) in text.replace("\u2019", "'"), f"no line about {path.name}"
+        assert page_summary(path) in text, f"no line about {path.name}"
+    headings = [heading for level, heading in _headings(book) if level == 2]
+    assert headings[:3] == ["What you will learn", "Before you start", "Running the notebooks yourself"], headings
+    words = " ".join(re.sub(r"<[^>]+>", " ", text).split())  # code spans break a command into tags
+    for needed in ("numpy", "linear algebra", "roughly an hour", "make setup", "pip install", "jupyter lab", "helpers"):
+        assert needed in words, f"the landing page does not mention {needed!r}"
 
 
 def test_every_page_has_the_whole_book_in_its_sidebar_and_its_neighbours_linked(book):
@@ -261,6 +342,38 @@ def test_chapter_2s_parameter_table_is_a_table(book):
     assert len(rows) > 30 and all(len(row) == len(rows[0]) == 5 for row in rows), "the parameter table's shape"
     assert ["grid_step", "1.5"] in [row[1:3] for row in rows], "the table lacks grid_step's default"
     assert "|---|" not in page.read_text(encoding="utf-8")
+
+
+HASH_OR_FILE = re.compile(r"[0-9a-f]{16}|\.(png|jpe?g|gif|svg)$", re.IGNORECASE)
+
+
+def test_every_picture_has_a_text_alternative_not_a_file_name(book):
+    """Docutils gives a picture without alt text its file name, for myst-nb a hash: the build gives the page's
+    title and the figure's number (or the picture's place) instead, where the notebook gave none."""
+    for page in _pages(book):
+        for number, picture in enumerate(_pictures(page)):
+            alt = (picture["alt"] or "").strip()
+            assert alt and not HASH_OR_FILE.search(alt), f"{page.name}, picture {number}: alt text {alt!r}"
+
+
+def test_every_figure_a_notebook_draws_has_its_own_caption_and_alt_text(book):
+    """The notebooks' convention: a cell whose output is a figure carries
+    ``mystnb: {figure: {caption, name}, image: {alt}}``, so the book shows "Figure N.k" and a caption under the
+    picture, and a reader who cannot see it hears what it shows. The scan player (an animation in raw HTML)
+    cannot take cell metadata: its alt text is the build's."""
+    lacking = []
+    for page in _pages(book)[1:]:
+        title = _headings(page)[0][1]
+        chapter = site_ext.chapter_label(page.relative_to(book.parent).with_suffix("").as_posix())
+        for number, picture in enumerate(_pictures(page)):
+            if picture["id"].startswith(ANIMATION_IMG):
+                continue
+            figure, alt = picture["figure"], picture["alt"] or ""
+            if figure is None or not re.fullmatch(rf"Figure {chapter}\.\d+", figure["number"]):
+                lacking.append(f"{page.name} picture {number}: no numbered caption")
+            if alt.startswith(title):
+                lacking.append(f"{page.name} picture {number}: no alt text of its own")
+    assert not lacking, f"{len(lacking)} pictures lack a caption or alt text:\n" + "\n".join(lacking)
 
 
 # In a headless browser, from disk: one Chromium for all pages.
@@ -409,6 +522,73 @@ def test_the_pictures_show_in_the_browser(book, browser, tmp_path):
         painted = browser.screenshot(tmp_path / f"picture{number}.png", box)
         share = _colourful_share(painted)
         assert share > 0.05, f"picture {number} of 07 shows {share:.1%} colourful pixels in the browser"
+
+
+# Whether the page scrolls sideways, and which boxes stick out of the window without a scroll bar of their own.
+SIDEWAYS = """(() => {
+  const width = document.documentElement.clientWidth;
+  const scrolls = e => { for (let a = e.parentElement; a && a !== document.body; a = a.parentElement)
+    if (getComputedStyle(a).overflowX !== 'visible') return true; return false; };
+  const out = [...document.querySelectorAll('article *')].filter(e => e.getBoundingClientRect().right > width + 1
+    && e.checkVisibility() && !scrolls(e)).map(e => e.tagName + ' ' + (e.textContent || '').slice(0, 40));
+  const squashed = [...document.querySelectorAll('article img')].filter(i => i.checkVisibility() && i.naturalWidth)
+    .filter(i => { const r = i.getBoundingClientRect(), shape = i.naturalHeight / i.naturalWidth;
+                   return Math.abs(r.height / r.width - shape) > 0.02 * shape; })
+    .map(i => i.alt);
+  const cut = [...document.querySelectorAll('article button, article input')].filter(e => e.checkVisibility())
+    .filter(e => e.getBoundingClientRect().right > width + 1).map(e => e.title || e.className);
+  return {page: document.documentElement.scrollWidth, window: width, out: out.slice(0, 5), squashed, cut};
+})()"""
+
+
+def test_no_page_scrolls_sideways_on_a_phone(book, browser):
+    """At 400 px, long code, printed lines and tables scroll inside their own boxes and long code named in the
+    prose breaks: the page itself is never wider than the window. Pictures shrink to it in their own shape, and
+    the scan player's buttons stay within reach."""
+    browser.resize(400, 800)
+    try:
+        for page in [*_pages(book), book.parent / "search.html"]:
+            browser.open(page.resolve().as_uri())
+            browser.evaluate(MATHJAX_DONE)
+            state = browser.evaluate(SIDEWAYS)
+            assert state["page"] <= state["window"], f"{page.name} scrolls sideways at 400 px: {state}"
+            assert not state["out"], f"{page.name}: boxes run off a 400 px window: {state['out']}"
+            assert not state["squashed"], f"{page.name}: pictures out of shape: {state['squashed']}"
+            assert not state["cut"], f"{page.name}: controls beyond the window's edge: {state['cut']}"
+    finally:
+        browser.resize(1300, 900)
+
+
+# Each visible code box: whether it scrolls, and its longest line's length.
+CODE_BOXES = """[...document.querySelectorAll('div.cell_input pre')].filter(p => p.checkVisibility())
+  .map(p => [p.scrollWidth > p.clientWidth + 1, Math.max(...p.innerText.split('\\n').map(l => l.length))])"""
+
+
+def test_a_code_line_of_88_characters_fits_its_box_on_a_laptop_screen(book, browser):
+    """The notebooks keep code lines to 88 characters: on a 1366 px wide screen such a line shows whole,
+    and only a box holding a longer line scrolls."""
+    browser.resize(1366, 800)
+    try:
+        for page in _pages(book)[1:]:
+            browser.open(page.resolve().as_uri())
+            boxes = browser.evaluate(CODE_BOXES)
+            cut = [longest for scrolls, longest in boxes if scrolls and longest <= 88]
+            assert not cut, f"{page.name}: {len(cut)} code boxes scroll with lines of at most {max(cut)} characters"
+    finally:
+        browser.resize(1300, 900)
+
+
+def test_printed_pages_wrap_long_lines_instead_of_cutting_them(book, browser):
+    """On paper nothing scrolls: a code line too long for the column wraps inside its box."""
+    browser.resize(1300, 900)
+    browser.open((book.parent / "07_map_comparison.html").resolve().as_uri())
+    widest = "Math.max(...[...document.querySelectorAll('div.cell pre')].map(e => e.scrollWidth - e.clientWidth))"
+    assert browser.evaluate(widest) > 0, "no code line of 07 is longer than its box: this test checks nothing"
+    browser.call("Emulation.setEmulatedMedia", session=True, media="print")
+    try:
+        assert browser.evaluate(widest) <= 0, "a printed code line runs past its box"
+    finally:
+        browser.call("Emulation.setEmulatedMedia", session=True, media="")
 
 
 # The output folder: replaced only when it is empty or an earlier site (checked on a one-page book, not executed).

@@ -6,7 +6,11 @@ MathJax 2.7 (from ``jupyter-server-mathjax``) is copied beside the pages and
 the theme's fonts and icons and the code cells' copy button
 (sphinx-copybutton) are its own files, so the book opens from disk with no
 server and no network. Cell tags (``hide-input``, ``hide-cell``,
-``remove-cell``) and admonitions (```` ```{note} ```` or ``:::{tip}``) work.
+``remove-cell``) and admonitions (```` ```{note} ```` or ``:::{tip}``) work;
+a cell JupyterLab shows folded is folded in the book too (``cells``). A
+cell's ``mystnb: {figure: {caption, name}, image: {alt}}`` metadata makes its
+picture a numbered figure with a caption and alt text (``sphinx_ext``); the
+landing page is written by ``landing``, the style by ``book.css``.
 
 The Sphinx source tree (a generated ``conf.py`` and ``index.md``, copies of
 the notebooks) lives in a temporary folder, so building leaves the checkout
@@ -27,58 +31,37 @@ from unittest import mock
 from .. import outdir
 from ..errors import SlamError
 from ..viz.display import KERNEL_ENVIRONMENT
+from . import cells
+from .landing import RESULT_PICTURE, SOLUTIONS, TITLE, index_page
 
 log = logging.getLogger(__name__)
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"  # the checkout's: notebooks are not installed
-SOLUTIONS = "solutions"  # notebooks/solutions/*.ipynb: the book's appendix, and its folder in the book
 FIGURES = "figures"  # notebooks/figures/: copied into the book
-RESULT_PICTURE = Path(FIGURES) / "result.png"  # the landing page's picture (the README's)
 TIMEOUT_S = 1800  # per notebook
-TITLE = "Aerial lidar SLAM, step by step"
 MATHJAX_DIR = "mathjax"  # the book's copy of MathJax 2.7, in its _static folder
 MATHJAX_URL = f"{MATHJAX_DIR}/MathJax.js?config=TeX-AMS-MML_HTMLorMML-full,Safe"  # the one full config it ships
 MARKER = ".helpers-site"  # lists what a build wrote: the next one may replace the folder while it holds only that
 
-# What each page teaches, one line on the landing page (by the notebook's number; a notebook not listed
-# here gets the first sentence of its introduction).
-SUMMARIES = {
-    "01": (
-        "the two input files the reference starts from; the map, the flight and the lidar's fan of rays; "
-        "one scan cast by hand with Open3D; the footprint"
-    ),
-    "02": "what each parameter controls, a picture each, and which defaults are the reference's and which are ours",
-    "03": "one pair of scans through Open3D's FPFH, matching, Kabsch, MSAC and ICP; odometry and its drift",
-    "04": "consecutive scans merged into submaps as they arrive, and which submaps a loop query may search",
-    "05": "recognising a place seen before; the reference's main loop written out and checked against the pipeline",
-    "06": "one loop edge on a line, the same chain in GTSAM factor by factor, then our graph and a robust kernel",
-    "07": "the rebuilt map scored against the truth, and the reference workflow against ours on the same flight",
-    "08": (
-        "a sparse tile flown low, where the reference's values lose the track; how sure each step is, drawn "
-        "along the track; a motion factor and GNSS fixes added to the graph factor by factor"
-    ),
-}
-
 # Sphinx warnings that mean a broken book (a missing page, picture or link target) rather than a style nit.
 FATAL_WARNINGS = re.compile(
     r"toctree contains reference to nonexisting document|image file not readable|undefined label|"
-    r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]"
+    r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]|"
+    r"Duplicate explicit target name"  # two figures given one name: a link to it would reach either
 )
 
 ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
 
-# The book's own style: a table a cell prints (chapter 2's parameters) fits the text column in a smaller type,
-# its long names (code) breaking where they must, instead of running off to the right.
-STYLE_SHEET = "book.css"
-STYLE = """.cell_output table { font-size: 0.8rem; }
-.cell_output table th, .cell_output table td { padding: 0.3rem 0.4rem; }
-.cell_output table code, .cell_output table code span { overflow-wrap: anywhere; white-space: normal; }
-"""
+STYLE_SHEET = Path(__file__).with_name("book.css")  # the book's own style, copied into _static
 
 # The generated conf.py: everything Sphinx is told.
 CONF = {
     "project": TITLE,
     "author": "the aerial-lidar-slam authors",
-    "extensions": ["myst_nb", "sphinx_copybutton"],  # the copy button's script and style sheet go to _static
+    # The copy button's script and style sheet go to _static; ours numbers figures by chapter and gives every
+    # picture a text alternative (helpers/site/sphinx_ext.py).
+    "extensions": ["myst_nb", "sphinx_copybutton", "helpers.site.sphinx_ext"],
+    "numfig": True,  # a cell's mystnb.figure caption is "Figure 3.2: ..." and {numref} can cite it
+    "numfig_format": {"figure": "Figure %s", "table": "Table %s", "code-block": "Listing %s", "section": "Section %s"},
     "exclude_patterns": ["_build", "**.ipynb_checkpoints"],
     "myst_enable_extensions": ["dollarmath", "amsmath", "colon_fence"],  # $...$, $$...$$, ::: admonitions
     "nb_render_markdown_format": "gfm",  # Markdown outputs (chapter 2's parameter table): commonmark has no tables
@@ -108,8 +91,8 @@ CONF = {
     },
     "html_theme": "sphinx_book_theme",
     "html_title": TITLE,
-    "html_static_path": ["_static"],  # the book's style sheet, STYLE below
-    "html_css_files": [STYLE_SHEET],
+    "html_static_path": ["_static"],  # the book's style sheet, STYLE_SHEET
+    "html_css_files": [STYLE_SHEET.name],
     "html_show_sphinx": False,
     "html_theme_options": {
         "home_page_in_toc": True,
@@ -155,10 +138,10 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         if (NOTEBOOKS / FIGURES).is_dir():  # pictures the notebooks' text may show, and the landing page's
             shutil.copytree(NOTEBOOKS / FIGURES, source / FIGURES, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
         picture = (source / RESULT_PICTURE).is_file()
-        (source / "index.md").write_text(_index(source, chapters, solutions, picture), encoding="utf-8")
+        (source / "index.md").write_text(index_page(source, chapters, solutions, picture), encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
         (source / "_static").mkdir()
-        (source / "_static" / STYLE_SHEET).write_text(STYLE, encoding="utf-8")
+        shutil.copyfile(STYLE_SHEET, source / "_static" / STYLE_SHEET.name)
         # myst-nb writes beside Sphinx's output folder (jupyter_execute/): so it builds in tmp, then moves.
         built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
@@ -167,14 +150,19 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
 
 
 def _add_notebook(path: Path, target: Path, execute: bool, sockets: Path) -> None:
-    if not execute:
-        shutil.copyfile(path, target)
-        return
     import nbformat
+
+    notebook = nbformat.read(path, as_version=4)
+    if execute:
+        _execute(notebook, path, sockets)
+    cells.prepare(notebook)  # folded cells stay folded, a figure cell's other outputs stay out of its figure
+    nbformat.write(notebook, target)
+
+
+def _execute(notebook, path: Path, sockets: Path) -> None:
     from nbclient import NotebookClient
     from traitlets.config import Config
 
-    notebook = nbformat.read(path, as_version=4)
     log.info("executing %s", path.name)
     # The kernel talks to us over Unix sockets (files named after ``sockets``), not TCP on localhost: no port
     # another user of the machine could reach, and no warning from the kernel that TCP is unencrypted.
@@ -183,7 +171,6 @@ def _add_notebook(path: Path, target: Path, execute: bool, sockets: Path) -> Non
     with mock.patch.dict(os.environ, KERNEL_ENVIRONMENT):
         where = {"metadata": {"path": str(path.parent)}}
         NotebookClient(notebook, timeout=TIMEOUT_S, resources=where, config=ipc, log=KERNEL_LOG).execute()
-    nbformat.write(notebook, target)
 
 
 class _DashComm(logging.Filter):
@@ -202,64 +189,6 @@ def _conf() -> str:
     lines = ['"""Generated by helpers.site.build: the book\'s Sphinx configuration."""', ""]
     lines += [f"{key} = {value!r}" for key, value in CONF.items()]
     return "\n".join(lines) + "\n"
-
-
-def _index(source: Path, chapters: list[Path], solutions: list[Path], picture: bool) -> str:
-    """The landing page: the result, a line per page, and the book's order (its toctrees)."""
-    lines = [f"# {TITLE}", ""]
-    lines += [
-        "A drone flies over an aerial map and scans the ground with a lidar. These pages rebuild, one stage a page,",
-        "the whole SLAM pipeline that turns those scans into a trajectory and a map: registration of scan pairs,",
-        "submaps, loop closure and a pose graph, each measured against the ground truth the simulator keeps.",
-        "",
-    ]
-    if picture:
-        lines += [
-            f"```{{figure}} {RESULT_PICTURE.as_posix()}",
-            ":alt: the default flight: ground truth, odometry only, and the trajectory after loop closure",
-            "",
-            "Where the book ends: the odometry alone (red) drifts away from the true flight (green); after loop",
-            "closure and pose-graph optimisation (blue) the trajectory lies back on it.",
-            "```",
-            "",
-        ]
-    lines += ["## The pages", ""]
-    for path in chapters:
-        lines.append(f"- [{_title(source / path.name)}]({path.name}): {_summary(path)}")
-    if solutions:
-        lines += ["", "## Appendix", ""]
-        lines += [f"- [{_title(source / SOLUTIONS / p.name)}]({SOLUTIONS}/{p.name})" for p in solutions]
-    lines += ["", "```{toctree}", ":hidden:", ":caption: The tutorial", "", *[p.stem for p in chapters], "```"]
-    if solutions:
-        lines += ["", "```{toctree}", ":hidden:", ":caption: Appendix: solutions", ""]
-        lines += [*[f"{SOLUTIONS}/{p.stem}" for p in solutions], "```"]
-    return "\n".join(lines) + "\n"
-
-
-def _title(path: Path) -> str:
-    """The notebook's first top-level heading."""
-    import nbformat
-
-    for cell in nbformat.read(path, as_version=4).cells:
-        if cell.cell_type == "markdown":
-            for line in cell.source.splitlines():
-                if line.startswith("# "):
-                    return line[2:].strip()
-    return path.stem
-
-
-def _summary(path: Path) -> str:
-    """What the page teaches: SUMMARIES, else the first sentence after its title."""
-    if path.name[:2] in SUMMARIES:
-        return SUMMARIES[path.name[:2]]
-    import nbformat
-
-    for cell in nbformat.read(path, as_version=4).cells:
-        if cell.cell_type == "markdown":
-            for paragraph in cell.source.split("\n\n"):
-                if paragraph.strip() and not paragraph.lstrip().startswith("#"):
-                    return re.split(r"(?<=[.!?])\s", " ".join(paragraph.split()), maxsplit=1)[0]
-    return ""
 
 
 def _sphinx(source: Path, out: Path, doctrees: Path) -> Path:
