@@ -15,7 +15,7 @@ def test_the_edge_ray_check_takes_the_hit_and_refuses_others(default_dataset, ca
     data = default_dataset
     pose = data.poses[250]
     a = np.radians(data.sensor.azimuth[1])
-    hit = exercises.edge_ray(data, 250)
+    hit = exercises._edge_ray(data, 250)
     assert np.isclose((np.linalg.inv(pose) @ np.append(hit, 1))[1], (pose[2, 3] - hit[2]) * np.tan(a), rtol=1e-3)
     assert exercises.check_edge_ray(hit + 0.01, data, 250) and said(capsys) == "correct"
     local = np.linalg.inv(pose) @ np.append(hit, 1.0)

@@ -17,7 +17,7 @@ WIDTH_TOLERANCE_M = 0.5  # a footprint width this close to the formula's is righ
 HEIGHT_FIELD_M = 0.5  # a hit lies on the height field if a corner of its cell is this close in height
 
 
-def edge_ray(dataset, index: int) -> np.ndarray:
+def _edge_ray(dataset, index: int) -> np.ndarray:
     """Where the leftmost ray of the fan (largest azimuth, elevation 0) from
     waypoint ``index`` meets the surface, in map coordinates (3,)."""
     a = np.radians(_azimuths(dataset.sensor).max())
@@ -34,7 +34,7 @@ def check_edge_ray(hit, dataset, index: int) -> bool:
     hit = np.asarray(hit, dtype=float).reshape(-1)
     if hit.shape != (3,) or not np.isfinite(hit).all():
         return report(False, "", "the answer is one point: x, y, z in the map frame (inf means the ray missed)")
-    truth = edge_ray(dataset, index)
+    truth = _edge_ray(dataset, index)
     pose = dataset.poses[index]
     if np.linalg.norm(hit - truth) <= HIT_TOLERANCE_M:
         return report(
@@ -55,7 +55,7 @@ def check_edge_ray(hit, dataset, index: int) -> bool:
     return report(False, "", hint)
 
 
-def footprint_width(sensor, depth: float) -> float:
+def _footprint_width(sensor, depth: float) -> float:
     """Width (m) across the track of the strip the fan covers on flat ground ``depth`` metres below."""
     across = np.tan(np.radians(_azimuths(sensor)))
     return float(depth * (across.max() - across.min()))
@@ -68,7 +68,7 @@ def check_footprint_width(width_m, sensor, depth: float, scans=None) -> bool:
     if unanswered(width_m):
         return report(False, "", hint)
     width_m = float(width_m)
-    truth = footprint_width(sensor, depth)
+    truth = _footprint_width(sensor, depth)
     if abs(width_m - truth) <= WIDTH_TOLERANCE_M:
         seen = ""
         if scans is not None:
