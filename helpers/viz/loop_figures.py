@@ -179,8 +179,8 @@ def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, s
     axes[0, 0].set_ylabel("x, forward (m)")
     axes[1, 0].set_ylabel("z (m), slab across the track")
     for key, name in (("fixed", "fixed: the old scan"), ("moving", "moving: the current scan")):
-        axes[0, -1].scatter([], [], color=COLORS[key], s=25, label=name)
-    axes[0, -1].legend(loc="upper right", fontsize=9, framealpha=0.95)
+        axes[1, -1].plot([], [], ".", ms=8, color=COLORS[key], label=name)
+    axes[1, -1].legend(loc="best", fontsize=9, framealpha=0.95)  # the side view has free corners
     return fig
 
 
