@@ -94,6 +94,15 @@ def candidates_figure(
     return fig
 
 
+def query_figure(seen: dict, base_radius: float):
+    """:func:`candidates_figure` of one query, from what
+    :func:`helpers.viz.loop_search.query_search` returned for it."""
+    where = (seen[key] for key in ("centres", "n_eligible", "position", "true_position"))
+    return candidates_figure(
+        *where, base_radius, seen["radius"], seen["tried"], seen["matched"], true_centres=seen["true_centres"]
+    )
+
+
 def search_radius_figure(true, apparent, found, base_radius: float, radius=None):
     """For every node that revisits an old submap: how far that submap's
     centre truly is (x) against how far it looks on the odometry (y). Points
