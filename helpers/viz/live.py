@@ -19,7 +19,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
@@ -89,11 +88,15 @@ class LiveView:
         self._draw(artists, frame or self.frames[-1])
         return fig
 
-    def animation(self, frames: int = 15, interval_ms: int = 300, dpi: int = 50, fmt: str = "jpeg") -> str:
+    def animation(self, frames: int = 15, interval_ms: int = 300, dpi: int = 72, quality: int = 50) -> str:
         """The recorded frames as an HTML animation (play, pause, step) with
         its pictures embedded and nothing fetched from the network. At most
         ``frames`` pictures, spread over the run and always ending on the last
-        frame; JPEG at ``dpi`` keeps the page light."""
+        frame, as JPEG of ``quality`` (lines and text survive a low one, and
+        the page stays light)."""
+        import tempfile
+        from pathlib import Path
+
         from matplotlib import animation
 
         if not self.frames:
@@ -105,8 +108,13 @@ class LiveView:
         anim = animation.FuncAnimation(
             fig, lambda k: self._draw(artists, self.frames[picked[k]]), frames=len(picked), interval=interval_ms
         )
-        with matplotlib.rc_context({"animation.frame_format": fmt, "savefig.dpi": dpi}):
-            html = anim.to_jshtml(default_mode="once")
+        # Animation.to_jshtml, with a JPEG quality it does not let one pass.
+        writer = animation.HTMLWriter(fps=1000 / interval_ms, embed_frames=True, default_mode="once")
+        writer.frame_format = "jpeg"
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder, "animation.html")
+            anim.save(str(path), writer=writer, dpi=dpi, savefig_kwargs={"pil_kwargs": {"quality": quality}})
+            html = path.read_text()
         plt.close(fig)
         return offline_player(html)
 
