@@ -100,7 +100,7 @@ def test_false_loop(capsys):
 def test_fixed_radius(monkeypatch, capsys):
     import helpers.exercises.loops as loops
 
-    monkeypatch.setattr(loops, "fixed_radius_loops", lambda result, end: [210, 211])
+    monkeypatch.setattr(loops, "_fixed_radius_loops", lambda result, end: [210, 211])
     result = SimpleNamespace(loops=[SimpleNamespace(j=j) for j in (206, 207, 210, 211, 230)])
     assert loops.check_fixed_radius(result, 212, [211, 210])
     assert "misses" in capsys.readouterr().out

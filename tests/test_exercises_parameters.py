@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from helpers.exercises.parameters import check_grid_step, check_skip_frames, footprint_overlap
+from helpers.exercises.parameters import _footprint_overlap, check_grid_step, check_skip_frames
 from helpers.features import grid_average
 
 
@@ -35,7 +35,7 @@ def test_grid_step(capsys):
 
 def test_skip_frames(capsys):
     data = _Strips()
-    right = max(gap for gap in range(1, 10) if footprint_overlap(data, 0, gap) >= 0.5)
+    right = max(gap for gap in range(1, 10) if _footprint_overlap(data, 0, gap) >= 0.5)
     check_skip_frames(right, data, start=0)
     check_skip_frames(right + 1, data, start=0)
     check_skip_frames(right - 1, data, start=0)

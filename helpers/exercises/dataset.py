@@ -13,11 +13,11 @@ from ..sensor import Surface, ray_pattern
 from . import report, unanswered
 
 HIT_TOLERANCE_M = 0.05  # a hit point this close to the true one is right
-WIDTH_TOLERANCE_M = 0.5  # a footprint width this close to the formula's is right
+SPOT_RADIUS_M = 1.5  # a scan sees a spot when one of its returns lands this close (one grid cell of notebook 2)
 HEIGHT_FIELD_M = 0.5  # a hit lies on the height field if a corner of its cell is this close in height
 
 
-def edge_ray(dataset, index: int) -> np.ndarray:
+def _edge_ray(dataset, index: int) -> np.ndarray:
     """Where the leftmost ray of the fan (largest azimuth, elevation 0) from
     waypoint ``index`` meets the surface, in map coordinates (3,)."""
     a = np.radians(_azimuths(dataset.sensor).max())
@@ -30,11 +30,11 @@ def check_edge_ray(hit, dataset, index: int) -> bool:
     """Exercise 1.1: ``hit`` (3,) is where the leftmost ray of scan ``index`` lands, in map coordinates."""
     hint = "cast one ray: origin the drone's position, direction the sensor-frame ray turned by the pose's rotation"
     if unanswered(hit):
-        return report(False, "", hint)
+        return report(False, "", "fill in `hit`: the point (x, y, z) where that ray meets the ground")
     hit = np.asarray(hit, dtype=float).reshape(-1)
     if hit.shape != (3,) or not np.isfinite(hit).all():
         return report(False, "", "the answer is one point: x, y, z in the map frame (inf means the ray missed)")
-    truth = edge_ray(dataset, index)
+    truth = _edge_ray(dataset, index)
     pose = dataset.poses[index]
     if np.linalg.norm(hit - truth) <= HIT_TOLERANCE_M:
         return report(
@@ -55,32 +55,39 @@ def check_edge_ray(hit, dataset, index: int) -> bool:
     return report(False, "", hint)
 
 
-def footprint_width(sensor, depth: float) -> float:
-    """Width (m) across the track of the strip the fan covers on flat ground ``depth`` metres below."""
-    across = np.tan(np.radians(_azimuths(sensor)))
-    return float(depth * (across.max() - across.min()))
+def _scans_seeing(dataset, index: int, radius: float = SPOT_RADIUS_M) -> list[int]:
+    """The scans with a return within ``radius`` metres (horizontally, map
+    frame) of the ground straight below waypoint ``index``."""
+    spot = dataset.poses[index][:2, 3]
+    seen = []
+    for i, scan in enumerate(dataset.scans):
+        if np.linalg.norm(dataset.poses[i][:2, 3] - spot) > np.linalg.norm(scan[:, :2], axis=1).max() + radius:
+            continue  # the spot is beyond this scan's reach
+        if np.any(np.linalg.norm(dataset.scan_in_map(i)[:, :2] - spot, axis=1) < radius):
+            seen.append(i)
+    return seen
 
 
-def check_footprint_width(width_m, sensor, depth: float, scans=None) -> bool:
-    """Exercise 1.2: ``width_m`` is the footprint's width on flat ground ``depth`` below the sensor;
-    with ``scans``, the answer is also compared with the widths the scans measure."""
-    hint = "the outermost rays leave at the first and last azimuth; each lands depth x tan(azimuth) to the side"
-    if unanswered(width_m):
-        return report(False, "", hint)
-    width_m = float(width_m)
-    truth = footprint_width(sensor, depth)
-    if abs(width_m - truth) <= WIDTH_TOLERANCE_M:
-        seen = ""
-        if scans is not None:
-            measured = np.median([np.ptp(scan[:, 1]) for scan in scans])
-            seen = f"; the scans measure {'within 5 %' if abs(measured / truth - 1) < 0.05 else 'further off'} of it"
-        return report(True, f"the strip is about {truth / depth:.2f} times as wide as the drone is high{seen}", hint)
-    if abs(width_m - truth / 2) <= WIDTH_TOLERANCE_M:
-        return report(False, "", "that is half the strip: count both sides of the track")
-    half_angle = np.radians(np.abs(_azimuths(sensor)).max())
-    if abs(width_m - 2 * depth * np.sin(half_angle)) <= WIDTH_TOLERANCE_M:
-        return report(False, "", "sine gives the point on a circle; flat ground is met at depth x tan(angle)")
-    return report(False, "", hint + " (angles in radians)")
+def check_scans_seeing(count, dataset, index: int = 250) -> bool:
+    """Exercise 1.2: ``count`` is how many scans of the flight see the spot
+    straight below waypoint ``index`` (a return within 1.5 m of it)."""
+    hint = f"a scan sees the spot when one of its returns, in the map frame, lands within {SPOT_RADIUS_M:g} m of it"
+    if unanswered(count):
+        return report(False, "", "fill in `count`: a whole number of scans")
+    seen = _scans_seeing(dataset, index)
+    if int(count) == len(seen):
+        return report(
+            True,
+            "a spot under the track stays in view for about a footprint's length of flight",
+            hint,
+        )
+    sensor = dataset.sensor
+    depth = dataset.poses[index][2, 3] - float(np.median(dataset.scan_in_map(index)[:, 2]))
+    spacing = np.linalg.norm(np.diff(dataset.poses[:, :2, 3], axis=0), axis=1).mean()
+    predicted = 2 * depth * np.tan(np.radians(sensor.elevation[1])) / spacing
+    if abs(float(count) - predicted) < 1.0 and round(float(count)) != len(seen):
+        return report(False, "", "that is what the footprint's length predicts; count the scans themselves")
+    return report(False, "", hint)
 
 
 def _azimuths(sensor) -> np.ndarray:

@@ -39,7 +39,7 @@ def search_graph(result, node: int) -> RelativeUncertainty:
     return graph
 
 
-def gate_radius(result, node: int, submap_id: int) -> float:
+def _gate_radius(result, node: int, submap_id: int) -> float:
     """The search radius (m) around submap ``submap_id`` for the query of
     ``node`` under the run's search: with ``search = "growth"``,
     :func:`helpers.loopsearch.radius_after` the path flown since the submap;
@@ -65,12 +65,12 @@ def gate_radius(result, node: int, submap_id: int) -> float:
 
 def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
     """Exercise 5.1: the search radius (m) around submap ``submap_id`` in the
-    loop query of ``node`` (:func:`gate_radius`)."""
+    loop query of ``node`` (:func:`_gate_radius`)."""
     if unanswered(radius):
         return report(False, "", "fill in the radius, in metres")
     if not any(q.node == node for q in result.queries):
         raise SlamError(f"node {node} ran no loop query that registered a submap: choose a node of result.queries")
-    truth = gate_radius(result, node, submap_id)
+    truth = _gate_radius(result, node, submap_id)
     base = result.config.loop_closure.loop_closure_search_radius
     if abs(float(radius) - truth) < 0.05:
         times = "more than twice" if truth > 2 * base else "more than"
@@ -88,7 +88,7 @@ def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
     return report(False, "", hint)
 
 
-def loop_edge_error(poses_gt, edge) -> tuple[float, float]:
+def _loop_edge_error(poses_gt, edge) -> tuple[float, float]:
     """How far a loop edge (``i``, ``j``, ``relative``) is from the true
     relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg),
     as :func:`helpers.evaluation.loop_error` grades it."""
@@ -100,7 +100,7 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
     against the truth, and whether it counts as a false loop edge."""
     if any(unanswered(a) for a in (error_m, error_deg, is_false)):
         return report(False, "", "fill in the two errors and the verdict (True or False)")
-    true_m, true_deg = loop_edge_error(poses_gt, edge)
+    true_m, true_deg = _loop_edge_error(poses_gt, edge)
     if not (abs(float(error_m) - true_m) < 0.01 and abs(float(error_deg) - true_deg) < 0.01):
         return report(
             False,
@@ -117,7 +117,7 @@ def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
     return report(True, f"within {limits} of the truth: a right loop edge", "")
 
 
-def fixed_radius_loops(result, end: int) -> list[int]:
+def _fixed_radius_loops(result, end: int) -> list[int]:
     """The nodes 0 .. ``end`` of ``result`` that close a loop when the
     search radius does not grow (``loop_search_growth = 0``, the reference's
     fixed radius, queried at every scan): the pipeline's own loop closer run
@@ -138,7 +138,7 @@ def check_fixed_radius(result, end: int, nodes) -> bool:
     """Exercise 5.3: the nodes 0 .. ``end`` that still close a loop with the reference's fixed radius."""
     if unanswered(nodes):
         return report(False, "", "fill in the list of nodes (the j of each loop edge found)")
-    truth = fixed_radius_loops(result, end)
+    truth = _fixed_radius_loops(result, end)
     answer = sorted(int(j) for j in np.asarray(nodes, int).ravel())
     if answer == sorted(truth):
         grown = {loop.j for loop in result.loops if loop.j <= end}

@@ -18,6 +18,7 @@ from .loop_figures import (
     loop_errors_figure,
     pair_overlay_figure,
     queries_figure,
+    query_figure,
     rmse_offsets_figure,
     search_radius_figure,
 )
@@ -36,6 +37,7 @@ __all__ = [
     "pose_graph_figure",
     "position_errors_figure",
     "queries_figure",
+    "query_figure",
     "query_search",
     "recent_rule_figure",
     "revisits",

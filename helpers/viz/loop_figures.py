@@ -94,50 +94,70 @@ def candidates_figure(
     return fig
 
 
-def search_radius_figure(flown, apparent, found, base_radius: float, growth: float, radius=None):
-    """For every node: the distance flown since the place it revisits (x)
-    against how far away that place looks on the odometry (y), with the
-    reference's fixed radius and the grown one. Places below a line are in
-    reach of that search. ``radius``, when given: the radius each query
-    searched around that place (nan where it left no record), as diamonds."""
-    flown, apparent, found = map(np.asarray, (flown, apparent, found))
-    if radius is not None:
-        radius = np.asarray(radius, float)
+def query_figure(seen: dict, base_radius: float):
+    """:func:`candidates_figure` of one query, from what
+    :func:`helpers.viz.loop_search.query_search` returned for it."""
+    where = (seen[key] for key in ("centres", "n_eligible", "position", "true_position"))
+    return candidates_figure(
+        *where, base_radius, seen["radius"], seen["tried"], seen["matched"], true_centres=seen["true_centres"]
+    )
+
+
+def search_radius_figure(true, apparent, found, base_radius: float, radius=None):
+    """For every node that revisits an old submap: how far that submap's
+    centre truly is (x) against how far it looks on the odometry (y). Points
+    on the diagonal saw no drift; points above the fixed radius (dashed) are
+    out of the reference's reach. ``radius``, when given: the radius each
+    query searched around that place (nan where it left no record), as
+    diamonds above the point. Only what is drawn gets a legend entry."""
+    true, apparent, found = np.asarray(true, float), np.asarray(apparent, float), np.asarray(found, bool)
+    searched = radius is not None and np.isfinite(radius).any()
+    top = max(apparent.max(), base_radius, np.nanmax(radius) if searched else 0) * 1.1
+    fig, ax = plt.subplots(figsize=(8, 4.6), constrained_layout=True)
+    ax.plot([0, top], [0, top], color=GREY, lw=1, label="no drift (odometry = truth)")
+    ax.axhline(base_radius, ls="--", color="black", lw=1.5, label=f"the reference's fixed radius {base_radius:.1f} m")
+    jitter = 0.25 * (np.arange(len(true)) % 5 - 2)  # nodes at the same true distance, side by side
+    if found.any():
+        ax.scatter(
+            true[found] + jitter[found],
+            apparent[found],
+            s=30,
+            color=COLORS["loop"],
+            edgecolor="black",
+            lw=0.5,
+            zorder=3,
+            label="nodes that closed a loop",
+        )
+    if (~found).any():
+        ax.scatter(
+            true[~found] + jitter[~found],
+            apparent[~found],
+            s=24,
+            color="white",
+            edgecolor=GREY,
+            zorder=2,
+            label="nodes that did not",
+        )
+    if searched:
         kept = np.isfinite(radius)
-        ax_label = "radius the query searched (uncertainty gate)"
-    fig, ax = plt.subplots(figsize=(9, 4.2), constrained_layout=True)
-    x = np.linspace(0, 1.05 * flown.max(), 50)
-    ax.plot(x, np.full_like(x, base_radius), "--", color="black", lw=1.5, label=f"fixed radius {base_radius:.1f} m")
-    ax.plot(
-        x,
-        base_radius + growth * x,
-        color=COLORS["loop"],
-        lw=2,
-        label=f'grown radius (search = "growth"): {base_radius:.1f} m + {growth:.0%} of the distance flown',
-    )
-    ax.scatter(
-        flown[found],
-        apparent[found],
-        s=22,
-        color=COLORS["loop"],
-        edgecolor="black",
-        lw=0.5,
-        zorder=3,
-        label="nodes that closed a loop",
-    )
-    ax.scatter(
-        flown[~found], apparent[~found], s=18, color="white", edgecolor=GREY, zorder=2, label="nodes that did not"
-    )
-    if radius is not None:
-        ax.scatter(flown[kept], radius[kept], s=24, marker="D", color="none", edgecolor=COLORS["loop"], label=ax_label)
+        ax.scatter(
+            true[kept] + jitter[kept],
+            radius[kept],
+            s=30,
+            marker="D",
+            color="none",
+            edgecolor=COLORS["loop"],
+            label="radius the query searched (uncertainty gate)",
+        )
     ax.set(
-        xlabel="distance flown since the revisited submap (m)",
-        ylabel="its distance on the odometry (m)",
-        ylim=(0, None),
-        xlim=(0, x[-1]),
+        xlabel="true distance to the nearest old submap centre (m)",
+        ylabel="distance on the odometry (m)",
+        xlim=(0, top),
+        ylim=(0, top),
+        aspect="equal",
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return fig
 
 
@@ -168,8 +188,8 @@ def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, s
     axes[0, 0].set_ylabel("x, forward (m)")
     axes[1, 0].set_ylabel("z (m), slab across the track")
     for key, name in (("fixed", "fixed: the old scan"), ("moving", "moving: the current scan")):
-        axes[0, -1].scatter([], [], color=COLORS[key], s=25, label=name)
-    axes[0, -1].legend(loc="upper right", fontsize=9, framealpha=0.95)
+        axes[1, -1].plot([], [], ".", ms=8, color=COLORS[key], label=name)
+    axes[1, -1].legend(loc="best", fontsize=9, framealpha=0.95)  # the side view has free corners
     return fig
 
 

@@ -41,8 +41,8 @@ def query_search(result, node: int, poses_gt) -> dict:
 def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
     """Every node that truly flies over an eligible old submap (true centre
     within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
-    the nodes): the distance flown since that submap, how far away it looks on
-    the odometry, whether the node closed a loop, and the search radius its
+    the nodes): the distance flown since that submap, how far away it truly
+    is and how far it looks on the odometry, whether the node closed a loop, and the search radius its
     query recorded around that submap (nan: the node registered no submap, so
     its query left no record)."""
     n = result.config.map.n_scans_per_submap
@@ -64,11 +64,12 @@ def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
         flown = distance_flown_since(result.submaps.centres[:count], position)[k]
         apparent = np.linalg.norm(result.submaps.centres[k] - position)
         radius = queries[node].radius[k] if node in queries else np.nan
-        rows.append((node, flown, apparent, node in closed, radius))
-    nodes, flown, apparent, found, radius = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 5
+        rows.append((node, flown, true_distance[k], apparent, node in closed, radius))
+    nodes, flown, true, apparent, found, radius = (np.array(c) for c in zip(*rows, strict=True)) if rows else ([],) * 6
     return {
         "nodes": nodes,
         "flown": flown,
+        "true": true,
         "apparent": apparent,
         "closed": np.asarray(found, bool),
         "radius": np.asarray(radius, float),

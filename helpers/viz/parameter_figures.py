@@ -234,6 +234,7 @@ def footprints_figure(outlines: dict, overlap: dict, default: int = 3):
         xlabel="skip_frames (scans between the two)",
         ylabel="shared ground (%)",
         ylim=(0, 100),
+        xticks=gaps,  # whole scans: a tick at every gap measured, none in between
         title="overlap with the fixed scan",
     )
     _grid(right)
