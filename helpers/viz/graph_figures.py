@@ -7,7 +7,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from .style import COLORS, grid, inset_zoom, segments, xy_of
+from .style import COLORS, FIGURE_WIDTH, grid, inset_zoom, segments, xy_of
 
 
 def scale_bar(axis, width_m: float) -> None:
@@ -248,7 +248,9 @@ def bad_edge_figure(ground_truth, results: dict, bad_pair, inset=None):
     wrong loop edge (drawn dashed black), against the ground truth."""
     gt = xy_of(ground_truth)
     n = len(results)
-    fig, axes = plt.subplots(1, n, figsize=(6.2 * n, 4.4), squeeze=False, sharey=True, constrained_layout=True)
+    fig, axes = plt.subplots(
+        1, n, figsize=(min(FIGURE_WIDTH, 6.2 * n), 4.0), squeeze=False, sharey=True, constrained_layout=True
+    )
     for ax, (title, poses) in zip(axes[0], results.items(), strict=True):
         xy = xy_of(poses)
         ax.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=3, label="ground truth")

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.patches import Ellipse
 
 from .graph_figures import zoom_with_scale
-from .style import COLORS, grid, xy_of
+from .style import COLORS, FIGURE_WIDTH, grid, xy_of
 
 # One colour per run or stage of notebook 8's graph: the shared odometry red and optimised blue first, then
 # colours no other notebook gives a meaning (purple is the reference's run, orange the loop edges).
@@ -58,7 +58,7 @@ def ellipses_figure(poses, covariances, magnify: float, ground_truth=None, every
     xy = xy_of(poses)
     cov = np.asarray(covariances, float)
     values, vectors = np.linalg.eigh(cov)  # ascending: [:, 1] is the loosest direction
-    fig, (top, side) = plt.subplots(1, 2, figsize=(13, 5), constrained_layout=True, width_ratios=(1, 1))
+    fig, (top, side) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 4.2), constrained_layout=True, width_ratios=(1, 1))
     if ground_truth is not None:
         gt = xy_of(ground_truth)
         top.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=1.5, label="ground truth")

@@ -8,7 +8,7 @@ from matplotlib.patches import Circle
 
 from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
 from ..geometry import transform_points
-from .style import COLORS, GREY, LIGHT, grid, xy_of
+from .style import COLORS, FIGURE_WIDTH, GREY, LIGHT, grid, xy_of
 
 
 def candidates_figure(
@@ -169,7 +169,12 @@ def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, s
     4 x 4 transform applied to ``moving``."""
     n = len(stages)
     fig, axes = plt.subplots(
-        2, n, figsize=(5.2 * n, 6.4), squeeze=False, constrained_layout=True, gridspec_kw={"height_ratios": [1.5, 1]}
+        2,
+        n,
+        figsize=(min(FIGURE_WIDTH, 5.2 * n), 6.4),
+        squeeze=False,
+        constrained_layout=True,
+        gridspec_kw={"height_ratios": [1.5, 1]},
     )
     keep_f = np.abs(fixed[:, 1]) < half_width
     for col, (title, transform) in enumerate(stages.items()):

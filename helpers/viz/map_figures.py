@@ -8,7 +8,7 @@ import numpy as np
 
 from ..evaluation import run_metrics
 from ..metrics import ate, rpe
-from .style import COLORS, grid, xy_of
+from .style import COLORS, FIGURE_WIDTH, grid, xy_of
 
 
 def comparison_rows(runs: dict) -> list[tuple[str, str, dict]]:
@@ -86,7 +86,7 @@ def runs_figure(ground_truth, optimized: dict, colors: dict, odometry: dict | No
     ``colors`` maps a run name to its colour."""
     truth = np.asarray(ground_truth)
     gt = xy_of(truth)
-    fig = plt.figure(figsize=(11, 7.6), constrained_layout=True)
+    fig = plt.figure(figsize=(FIGURE_WIDTH, 7.0), constrained_layout=True)
     spec = fig.add_gridspec(2, 2, height_ratios=(1.35, 1), width_ratios=(1.7, 1))
     whole, zoom, along = fig.add_subplot(spec[0, 0]), fig.add_subplot(spec[0, 1]), fig.add_subplot(spec[1, :])
     first = next(iter(optimized))

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.patches import Circle, Polygon
 
 from ..config import REFERENCE_WORKFLOW, STAGE_TABLES, Config, describe
-from .style import COLORS, HEIGHT_CMAP, grid
+from .style import COLORS, FIGURE_WIDTH, HEIGHT_CMAP, grid
 
 MATCH_COLORS = {"inlier": "#6a3d9a", "outlier": "#b0b0b0"}  # purple: kept by the robust fit; grey: rejected
 CORRECT_COLORS = {"correct": "#6a3d9a", "wrong": "#d0d0d0"}  # the same idea, judged by the ground truth
@@ -147,7 +147,9 @@ def descriptor_distance_figure(examples: dict, threshold: float, ratio: float):
     descriptor (a histogram), the nearest ``d1`` and second-nearest ``d2``
     marked, and what ``match_threshold`` and ``match_ratio`` decide.
     ``examples`` maps a title to the (M,) distances of one descriptor."""
-    fig, axes = plt.subplots(1, len(examples), figsize=(6 * len(examples), 3.8), sharey=True, constrained_layout=True)
+    fig, axes = plt.subplots(
+        1, len(examples), figsize=(min(FIGURE_WIDTH, 6 * len(examples)), 3.8), sharey=True, constrained_layout=True
+    )
     for ax, (title, distance) in zip(np.atleast_1d(axes), examples.items(), strict=True):
         d1, d2 = np.sort(distance)[:2]
         ax.hist(distance, bins=np.linspace(0, max(0.6, distance.max()), 80), color="#bdbdbd", label="every fixed point")
@@ -200,7 +202,7 @@ def footprints_figure(outlines: dict, overlap: dict, default: int = 3):
     fixed scan). Right: the share of ground they share (``overlap`` maps a
     gap to a share in [0, 1])."""
     fig, (left, right) = plt.subplots(
-        1, 2, figsize=(12, 4.4), constrained_layout=True, gridspec_kw={"width_ratios": [1.4, 1]}
+        1, 2, figsize=(FIGURE_WIDTH, 4.0), constrained_layout=True, gridspec_kw={"width_ratios": [1.4, 1]}
     )
     shades = plt.get_cmap("RdPu")(np.linspace(0.45, 0.95, max(1, len(outlines) - 1)))
     for (gap, polygon), color in zip(sorted(outlines.items()), [COLORS["fixed"], *shades], strict=True):

@@ -13,7 +13,7 @@ from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from ..geometry import transform_points
 from .parameter_figures import MATCH_COLORS, _grid
-from .style import COLORS, ERROR_CMAP
+from .style import COLORS, ERROR_CMAP, FIGURE_WIDTH
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
 HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")
@@ -39,7 +39,7 @@ def clouds_figure(moving, fixed, names=("moving", "fixed"), zoom_m: float = 40.0
         top[0], fixed[:, 0].min() + zoom_m / 2, fixed[:, 0].max() - zoom_m / 2
     )  # the zoom inside the strip
     window = (top[1] + zoom_m / 2, top[1] - zoom_m / 2, top[0] - zoom_m / 2, top[0] + zoom_m / 2)
-    fig, (ax, zoom) = plt.subplots(1, 2, figsize=(11, 3.9), width_ratios=(3.2, 1), constrained_layout=True)
+    fig, (ax, zoom) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 3.6), width_ratios=(3.2, 1), constrained_layout=True)
     for points, name, key in ((fixed, names[1], "fixed"), (moving, names[0], "moving")):
         _top_view(ax, points, color=COLORS[key], size=1.0, alpha=0.8, label=f"{name}: {len(points)} points")
         inside = (np.abs(points[:, 1] - top[1]) < zoom_m / 2) & (np.abs(points[:, 0] - top[0]) < zoom_m / 2)
@@ -105,7 +105,7 @@ def matches_figure(moving, fixed, matches, inliers, shown: int = 80, gap: float 
     rejected matches in grey."""
     rng = np.random.default_rng(seed)
     lift = fixed[:, 0].max() - moving[:, 0].min() + gap  # moving drawn this much farther forward
-    fig, ax = plt.subplots(figsize=(11, 5.4), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.0), constrained_layout=True)
     _top_view(ax, fixed, color=COLORS["fixed"], size=2)
     _top_view(ax, moving + [lift, 0, 0], color=COLORS["moving"], size=2)
     for kind, mask in (("outlier", ~inliers), ("inlier", inliers)):
@@ -216,7 +216,7 @@ def icp_convergence_figure(runs: dict):
     per-iteration arrays ``pose_cm``, ``surface_cm`` and ``rmse_m``, iteration
     0 being the start), the pose error against the truth, the median distance
     of the moved points to the true surface, and ICP's own RMSE."""
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.8), constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(FIGURE_WIDTH, 3.4), constrained_layout=True)
     panels = (
         ("pose_cm", "pose error vs the truth (cm)", "error of the motion", True),
         ("surface_cm", "median distance to the surface (cm)", "moved points vs the true ground", True),

@@ -18,7 +18,7 @@ import numpy as np
 from ..scene import CLASS_NAMES
 from .display import interactive_views, use_offscreen_vtk
 from .player import scan_player, top_down  # noqa: F401 (notebooks call render.scan_player)
-from .style import CLASS_COLORS, COLORS, ERROR_CMAP, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
+from .style import CLASS_COLORS, COLORS, ERROR_CMAP, FIGURE_WIDTH, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
 
 
 def pyvista():
@@ -220,7 +220,7 @@ def height_field_figure(field, waypoints: np.ndarray | None = None):
 
     xmin, xmax, ymin, ymax = field.bounds
     extent = (xmin, xmax, ymin, ymax)
-    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 4.6), constrained_layout=True)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 3.8), constrained_layout=True)
     shown = np.where(field.valid, field.z, np.nan)
     im = left.imshow(shown, origin="lower", extent=extent, cmap=HEIGHT_CMAP)
     fig.colorbar(im, ax=left, label="height (m)", shrink=0.85)

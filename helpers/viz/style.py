@@ -25,6 +25,9 @@ CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by hel
 HEIGHT_CMAP = "viridis"  # heights: dark violet (low) to yellow (high)
 ERROR_CMAP = "plasma"  # errors and distances: dark blue (small) to yellow (large)
 WINDOW = (900, 600)  # pixels of a 3-D view
+# inches: the widest figure, 800 px at the notebooks' 80 dpi, about the book's column; a wider one is shrunk
+# to fit and its legends and ticks with it
+FIGURE_WIDTH = 10.0
 GREY = "#9a9a9a"  # what is there but not the point (too recent submaps, ...)
 LIGHT = "#d9d9d9"
 

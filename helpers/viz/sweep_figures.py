@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from .parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
-from .style import COLORS
+from .style import COLORS, FIGURE_WIDTH
 
 
 def _stacked_matches(ax, x, correct, total, width, xlabel, default, log=False):
@@ -41,7 +41,7 @@ def neighbors_figure(neighbors, n_correct, n_matches, default: int = 60):
 
 def matching_figure(thresholds, th_correct, th_total, ratios, ra_correct, ra_total, defaults=(0.1, 0.97)):
     """Matches and share correct against the match threshold (left) and the ratio (right)."""
-    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 3.8), constrained_layout=True)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 3.4), constrained_layout=True)
     x_th, x_ra = np.arange(len(thresholds)), np.arange(len(ratios))
     s1 = _stacked_matches(left, x_th, th_correct, th_total, 0.6, "match threshold", list(thresholds).index(defaults[0]))
     s2 = _stacked_matches(right, x_ra, ra_correct, ra_total, 0.6, "match ratio", list(ratios).index(defaults[1]))
@@ -68,7 +68,7 @@ def _legend(ax, twin):
 def skip_frames_figure(gaps, overlap, n_inliers, error_cm, failed, default: int = 3):
     """Overlap, MSAC inliers and final translation error against the gap between two scans."""
     gaps, failed = np.asarray(gaps), np.asarray(failed, bool)
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), constrained_layout=True)
+    fig, axes = plt.subplots(1, 3, figsize=(FIGURE_WIDTH, 3.2), constrained_layout=True)
     axes[0].plot(gaps, 100 * np.asarray(overlap), "o-", color=COLORS["fixed"], lw=2)
     axes[0].set(ylabel="overlap (%)", title="shared ground", ylim=(0, 100))
     axes[1].plot(gaps, n_inliers, "o-", color=MATCH_COLORS["inlier"], lw=2)
