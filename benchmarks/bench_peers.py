@@ -1,6 +1,6 @@
 """Our odometry against its peers on the same scans, in one run: ms per accepted scan and ATE.
 
-    .venv/bin/python benchmarks/bench_peers.py [--scans N]
+    .venv/bin/python benchmarks/bench_peers.py [--scans N] [--peers "ours, global" "Open3D" ...] [--no-kiss-matcher]
 
 Every system registers the default flight's accepted scans (every
 ``skip_frames``-th) one after the other and chains the motions from the
@@ -8,6 +8,8 @@ first true pose; the ATE is taken against the true poses of those scans.
 
 - ours, global: the reference's workflow (FPFH, matching, robust fit, ICP) for every scan;
 - ours, global, keypoints 0.5: the same, describing and matching the more tilted half of each scan;
+- ours, global, msac4 (and 2 m / 40, 3 m / 30): the yaw-and-translation robust fit (``robust_fit = "msac4"``),
+  alone and with a coarser descriptor grid and fewer neighbours (issue 22's levers);
 - ours, tracking: ICP from the last motion, the global workflow when a check fails;
 - Open3D's recipe: its global-registration tutorial on 1.5 m voxels (FPFH,
   RANSAC on feature matches), refined by its generalized ICP;
@@ -29,7 +31,9 @@ sensor: median, max, pairs off by more than 1 m of all), pairs it flagged invali
 the error after the package's ICP (the run's configuration) refines it, and
 the ATE of those refined motions chained.
 
-A peer that is not installed is reported as missing, not as a failure.
+Each row gives wall ms and process CPU ms per scan (every thread's; on a busy machine the CPU
+time is the fairer figure) and both as multiples of the first row run. A peer that is not
+installed is reported as missing, not as a failure.
 """
 
 from __future__ import annotations
@@ -50,10 +54,12 @@ from helpers.odometry import run_odometry
 VOXEL = 1.5  # m, Open3D's recipe (the reference's gridStep)
 
 
-def ours(mode: str, keypoint_share: float = 1.0):
+def ours(mode: str, features: dict | None = None, registration: dict | None = None):
+    """Our odometry in ``mode`` with some ``[features]`` and ``[registration]`` values changed."""
+
     def run(scans, first_pose):
         config = Config().with_values(
-            features=dict(keypoint_share=keypoint_share), registration=dict(mode=mode, skip_frames=1)
+            features=features or {}, registration={"mode": mode, "skip_frames": 1, **(registration or {})}
         )
         return run_odometry(scans, first_pose, config).poses
 
@@ -127,7 +133,16 @@ def kiss_icp_odometry(scans, first_pose):
 
 PEERS = {
     "ours, global (the reference)": (ours("global"), None),
-    "ours, global, keypoints 0.5": (ours("global", 0.5), None),
+    "ours, global, keypoints 0.5": (ours("global", {"keypoint_share": 0.5}), None),
+    "ours, global, msac4": (ours("global", registration={"robust_fit": "msac4"}), None),
+    "ours, global, msac4, 2 m / 40": (
+        ours("global", {"grid_step": 2.0, "neighbors": 40}, {"robust_fit": "msac4"}),
+        None,
+    ),
+    "ours, global, msac4, 3 m / 30": (
+        ours("global", {"grid_step": 3.0, "neighbors": 30}, {"robust_fit": "msac4"}),
+        None,
+    ),
     "ours, tracking": (ours("tracking"), None),
     "Open3D's recipe": (open3d_recipe, "open3d"),
     "small_gicp odometry": (small_gicp_odometry, "small_gicp"),
@@ -226,31 +241,42 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--scans", type=int, default=None, help="accepted scans to register (default: all)")
     parser.add_argument("--kiss-voxel", type=float, default=VOXEL, help="KISS-Matcher's voxel, m (default 1.5)")
+    parser.add_argument(
+        "--peers", nargs="+", default=None, metavar="NAME", help="only the rows whose names start so (default: all)"
+    )
+    parser.add_argument("--no-kiss-matcher", action="store_true", help="leave out the KISS-Matcher rows")
     args = parser.parse_args()
     if (args.scans is not None and args.scans < 2) or not 0 < args.kiss_voxel <= 20:
         parser.exit(2, "error: --scans must be at least 2 and --kiss-voxel between 0 and 20 m\n")
+    peers = {n: p for n, p in PEERS.items() if args.peers is None or any(n.startswith(w) for w in args.peers)}
+    if not peers:
+        parser.exit(2, f"error: no row starts with {' or '.join(args.peers)}: the rows are {'; '.join(PEERS)}\n")
     data = helpers.create_dataset()
     indices = np.arange(0, len(data), Config().registration.skip_frames)[: args.scans]
     scans, truth = [data.scans[i] for i in indices], data.poses[indices]
     print(f"{len(indices)} accepted scans of the default flight ({len(data)} scans)", flush=True)
     rows = []
-    for name, (run, module) in PEERS.items():
+    for name, (run, module) in peers.items():
         if module is not None:
             try:
                 __import__(module)
             except ImportError:
                 print(f"{name:<30} missing: pip install '.[bench]'")
                 continue
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         poses = run(scans, truth[0])
         ms = 1000 * (time.perf_counter() - start) / (len(scans) - 1)
-        rows.append((name, ms, ate(poses, truth).rmse))
-        print(f"{name:<30} {ms:8.1f} ms per scan, ATE {rows[-1][2]:.2f} m", flush=True)
-    reference = rows[0][1]
-    print(f"{'system':<30} {'ms/scan':>8} {'x ours':>7} {'ATE m':>7}")
-    for name, ms, error in rows:
-        print(f"{name:<30} {ms:8.1f} {ms / reference:7.2f} {error:7.2f}")
-    kiss_matcher_rows(scans, truth, args.kiss_voxel)
+        cpu_ms = 1000 * (time.process_time() - cpu) / (len(scans) - 1)
+        rows.append((name, ms, cpu_ms, ate(poses, truth).rmse))
+        print(f"{name:<30} {ms:8.1f} ms per scan ({cpu_ms:.1f} CPU ms), ATE {rows[-1][3]:.2f} m", flush=True)
+    if not rows:
+        return
+    reference = rows[0]
+    print(f"{'system':<30} {'ms/scan':>8} {'x first':>7} {'CPU ms':>7} {'x first':>7} {'ATE m':>7}")
+    for name, ms, cpu_ms, error in rows:
+        print(f"{name:<30} {ms:8.1f} {ms / reference[1]:7.2f} {cpu_ms:7.1f} {cpu_ms / reference[2]:7.2f} {error:7.2f}")
+    if not args.no_kiss_matcher:
+        kiss_matcher_rows(scans, truth, args.kiss_voxel)
 
 
 if __name__ == "__main__":

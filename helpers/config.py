@@ -54,6 +54,7 @@ NOISE_SEED_VARIABLE = "HELPERS_NOISE_SEED"  # sets the lidar noise seed of the e
 METRICS = ("point-to-point", "point-to-plane", "plane-to-plane")
 ICP_BACKENDS = ("small_gicp", "open3d")
 MODES = ("global", "tracking")
+ROBUST_FITS = ("msac", "msac4")  # rigid from samples of 3 matches (the reference); yaw and translation from 2
 LOOP_SEARCHES = ("uncertainty", "growth")
 
 
@@ -108,6 +109,11 @@ class RegistrationConfig(BoundedTable):
         0.99, "the robust fit stops once it is this sure to have drawn an all-inlier sample", "Confidence"
     )
     seed: int = param(0, "seed of the robust fit's sampling")
+    robust_fit: str = param(
+        "msac",
+        "robust fit: msac (rigid, samples of 3 matches: the reference) or msac4 (yaw and translation, "
+        "samples of 2, its trial cap fitted to max_num_trials; ICP finds the tilt)",
+    )
     metric: str = param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane", "metric")
     inlier_distance: float = param(3.0, "ICP ignores correspondences farther apart than this, metres", "inlierDistance")
     icp_grid_step: float = param(0.75, "grid of the clouds ICP refines on, metres (0: the feature clouds)")
@@ -140,6 +146,7 @@ class RegistrationConfig(BoundedTable):
         self._within("max_num_trials", 1, MAX_TRIALS)
         self._check("confidence", lambda v: 0 < v < 1, "in (0, 1)")
         self._check("seed", lambda v: v >= 0, "zero or a positive integer")
+        self._one_of("robust_fit", ROBUST_FITS)
         self._one_of("metric", METRICS)
         self._one_of("icp_backend", ICP_BACKENDS)
         self._between("inlier_distance", MIN_GRID, MAX_LENGTH, "a positive number of metres")

@@ -4,8 +4,9 @@
 (once each), describes it (FPFH, :func:`describe`) and makes its ICP cloud
 ready (normals and generalized-ICP covariances); that preparation serves
 twice, as the moving scan of one pair and the fixed scan of the next.
-:func:`register_frames` matches descriptors, fits a rigid transform robustly
-(MSAC) and refines it by ICP; :func:`track_frames` runs ICP alone from the
+:func:`register_frames` matches descriptors, fits a transform robustly
+(MSAC, rigid or yaw and translation: ``[registration] robust_fit``) and
+refines it by ICP; :func:`track_frames` runs ICP alone from the
 last motion. The ICP stops when an iteration changes its RMSE by less than
 ``[registration] icp_tolerance`` metres and its inlier fraction by less than
 that fraction (a tighter criterion sometimes oscillates by a few inliers
@@ -31,7 +32,7 @@ from .geometry import check_points, rotation_angle_deg
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
 from .overlap import crop, cropped_cloud
-from .registration import estimate_rigid_msac
+from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
 
@@ -157,18 +158,11 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
     timings["match"] = _ms(start)
 
-    # 2. Robust rigid fit on the matched points.
+    # 2. Robust fit on the matched points (rigid, or yaw and translation: [registration] robust_fit).
     start = time.perf_counter()
     inliers = np.zeros(len(matches), dtype=bool)
     try:
-        T_coarse, inliers = estimate_rigid_msac(
-            moving.points[matches[:, 0]],
-            fixed.points[matches[:, 1]],
-            fit.max_distance,
-            fit.max_num_trials,
-            fit.seed,
-            fit.confidence,
-        )
+        T_coarse, inliers = robust_fit(moving.points[matches[:, 0]], fixed.points[matches[:, 1]], fit)
     except SlamError as exc:
         T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
     timings["msac"] = _ms(start)

@@ -1,5 +1,8 @@
 """Stage 3b: the coarse rigid fit of two scans from matched points (the
 reference's ``estgeotform3d`` with MSAC); :mod:`helpers.icp` refines it.
+:func:`robust_fit` runs the fit ``[registration] robust_fit`` names: this
+module's six-degree-of-freedom MSAC or :mod:`helpers.fit4dof`'s yaw and
+translation.
 
 A transform ``T`` (4 x 4) maps *moving* points onto *fixed* points:
 ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``.
@@ -40,6 +43,43 @@ def kabsch(moving: np.ndarray, fixed: np.ndarray) -> np.ndarray:
     out[..., :3, 3] = fc[..., 0, :] - (rot @ np.swapaxes(mc, -1, -2))[..., 0]
     out[..., 3, 3] = 1.0
     return out
+
+
+def robust_fit(moving_pts, fixed_pts, fit) -> tuple[np.ndarray, np.ndarray]:
+    """The robust fit ``fit.robust_fit`` names (``fit``: a
+    :class:`helpers.config.RegistrationConfig`), with its distance, trial cap,
+    seed and confidence: ``(T, inliers)`` as :func:`estimate_rigid_msac` returns.
+
+    ``"msac"``: :func:`estimate_rigid_msac`, at most ``max_num_trials``
+    samples of 3 matches. ``"msac4"``: :func:`helpers.fit4dof.estimate_yaw_msac`,
+    roll and pitch left to ICP; its cap is :func:`equivalent_trials`, so that
+    it gives up at the same inlier ratio as the rigid fit would.
+    """
+    if fit.robust_fit == "msac":
+        return estimate_rigid_msac(
+            moving_pts, fixed_pts, fit.max_distance, fit.max_num_trials, fit.seed, fit.confidence
+        )
+    if fit.robust_fit == "msac4":
+        from .fit4dof import SAMPLE_SIZE as PAIR_SIZE  # fit4dof builds on this module: imported when used
+        from .fit4dof import estimate_yaw_msac
+
+        cap = equivalent_trials(fit.max_num_trials, fit.confidence, PAIR_SIZE)
+        return estimate_yaw_msac(moving_pts, fixed_pts, fit.max_distance, cap, fit.seed, fit.confidence)
+    raise SlamError(f"unknown robust fit {fit.robust_fit!r}: use msac or msac4")
+
+
+def equivalent_trials(max_trials: int, confidence: float, sample_size: int) -> int:
+    """The trial cap for samples of ``sample_size`` matches that stops at the
+    same inlier ratio as ``max_trials`` samples of 3.
+
+    ``max_trials`` samples of 3 reach ``confidence`` exactly when the inlier
+    ratio ``w`` satisfies ``w^3 = 1 - (1 - confidence)^(1 / max_trials)``;
+    the cap is :func:`trials_needed` at that ``w`` for the smaller samples
+    (the reference's 3000 at 99 % becomes 344 samples of 2). Both fits then
+    draw all they may on the same hard pairs, and stop as early on easy ones.
+    """
+    floor = -np.expm1(np.log1p(-confidence) / max_trials)  # w^3 at the cap
+    return trials_needed(floor ** (1.0 / SAMPLE_SIZE), confidence, max_trials, sample_size)
 
 
 def estimate_rigid_msac(

@@ -139,7 +139,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     truth = np.linalg.inv(flight.poses[fixed_id]) @ flight.poses[moving_id]
     far = truth.copy()
     far[:3, 3] += [40.0, 0.0, 0.0]  # most of the 53 m strip along the track: ICP settles 100 m off on few pairs
-    monkeypatch.setattr(frames, "estimate_rigid_msac", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(flight.scans[k], config), config) for k in (fixed_id, moving_id))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert "paired" in (pair.fallback or ""), pair.fallback
@@ -166,7 +166,7 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
     far = truth.copy()
     far[:3, 3] += [4.0, 0.0, 0.0]  # still over the plane: as many pairs as the truth
-    monkeypatch.setattr(frames, "estimate_rigid_msac", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth)
     assert "too flat" in (pair.fallback or ""), pair.fallback

@@ -248,3 +248,68 @@ def test_pairing_says_how_well_the_pairs_pin_a_translation():
     assert share == 1.0 and constraint > 0.5
     far = pairing(box, box, _transform(0.0, [50.0, 0.0, 0.0]), 3.0)
     assert far == (0.0, 0.0)  # nothing paired
+
+
+@pytest.mark.parametrize(("yaw", "shift"), [(30.0, [10.0, 0.0, 0.0]), (-20.0, [-6.0, 8.0, 1.0])])
+def test_register_pair_with_the_yaw_and_translation_fit_recovers_a_known_transform(flight, yaw, shift):
+    """``robust_fit = "msac4"`` through the registration entry point: the coarse fit is a pure yaw and
+    translation (no tilt at all, so the 4-DoF fit ran), near the truth, and ICP adds the tilt."""
+    from helpers.config import Config
+    from helpers.odometry import register_pair
+
+    config = Config().with_values(registration={"robust_fit": "msac4"})
+    extra = _transform(yaw, shift)
+    i, j = 20, 23  # two accepted scans 6 m apart
+    truth = extra @ np.linalg.inv(flight.poses[i]) @ flight.poses[j]
+    result = register_pair(flight.scans[j], _apply(extra, flight.scans[i]), config)
+    assert result.fallback is None
+    np.testing.assert_array_equal(result.T_coarse[2, :3], [0.0, 0.0, 1.0])  # roll = pitch = 0: the 4-DoF fit
+    coarse_dt, coarse_dr = _errors(result.T_coarse, truth)
+    assert coarse_dt < 1.0 and coarse_dr < 0.5, (coarse_dt, coarse_dr)
+    dt, dr = _errors(result.T_fine, truth)
+    assert dt < 0.15 and dr < 0.1, (dt, dr)
+    assert result.inliers.sum() >= 20
+
+
+def test_robust_fit_runs_the_fit_the_configuration_names():
+    from helpers.config import RegistrationConfig
+    from helpers.fit4dof import estimate_yaw_msac
+    from helpers.registration import robust_fit
+
+    moving, fixed, truth, outliers = _matches_with_outliers(outlier_fraction=0.5)
+    rigid = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3))
+    expected = estimate_rigid_msac(moving, fixed, 0.3, 3000)
+    np.testing.assert_array_equal(rigid[0], expected[0])
+    yaw = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3, robust_fit="msac4", seed=2))
+    np.testing.assert_array_equal(yaw[0], estimate_yaw_msac(moving, fixed, 0.3, 344, seed=2)[0])
+    assert _displacement(yaw[0], truth, moving) < 0.05  # the truth is a pure yaw and translation
+    assert np.mean(yaw[1][~outliers]) > 0.95 and np.mean(yaw[1][outliers]) < 0.05
+
+
+def test_the_yaw_fit_s_trial_cap_gives_up_at_the_rigid_fit_s_inlier_ratio():
+    from helpers.registration import equivalent_trials
+
+    # 3000 samples of 3 reach 99 % at w^3 = 1 - 0.01^(1/3000), w = 0.1154; samples of 2 need 344 there.
+    assert equivalent_trials(3000, 0.99, 2) == 344
+    assert equivalent_trials(3000, 0.99, 3) == 3000
+    for cap, confidence in [(3000, 0.99), (500, 0.9), (50_000, 0.999)]:
+        pairs = equivalent_trials(cap, confidence, 2)
+        for w in np.linspace(0.02, 0.9, 89):
+            triples_needed = trials_needed(w, confidence, 10**9, 3)
+            pairs_needed = trials_needed(w, confidence, 10**9, 2)
+            if triples_needed < 0.98 * cap:  # the rigid fit would stop early: so does the yaw fit
+                assert pairs_needed <= pairs
+            if triples_needed > 1.02 * cap:  # the rigid fit hits its cap: so does the yaw fit
+                assert pairs_needed >= pairs
+
+
+def test_the_configuration_refuses_an_unknown_robust_fit():
+    from helpers.config import Config, RegistrationConfig
+    from helpers.configfile import config_from_dict
+
+    assert RegistrationConfig().robust_fit == "msac"  # the reference's fit stays the default
+    with pytest.raises(SlamError, match=r"\[registration\] robust_fit must be one of msac, msac4, got 'ransac'"):
+        Config().with_values(registration={"robust_fit": "ransac"})
+    with pytest.raises(SlamError, match="robust_fit must be one of msac, msac4"):
+        config_from_dict({"registration": {"robust_fit": "MSAC4"}})
+    assert config_from_dict({"registration": {"robust_fit": "msac4"}}).registration.robust_fit == "msac4"
