@@ -15,9 +15,14 @@ from __future__ import annotations
 
 import numpy as np
 import open3d as o3d
+from threadpoolctl import ThreadpoolController
 
 from .errors import SlamError
 from .geometry import check_points
+
+# numpy's BLAS, found once. The matcher's products are small blocks: a second BLAS thread costs more in
+# hand-offs than it computes, and on a busy machine it waits for a core (benchmarks/bench_levers.py).
+BLAS = ThreadpoolController()
 
 HISTOGRAMS = 3  # FPFH is three histograms ...
 BINS = 11  # ... of 11 bins each
@@ -193,7 +198,8 @@ def _two_nearest(queries: np.ndarray, references: np.ndarray, reach: float | Non
     dimensions (even bounded by the match radius) is slower than this
     product, and a tree on the first few principal components still leaves
     hundreds of candidates per query within the match radius: descriptors
-    of smooth ground crowd together.
+    of smooth ground crowd together. The products run on one BLAS thread
+    (:data:`BLAS`): faster than two on blocks this small, idle or busy.
     """
     q = np.empty((len(queries), queries.shape[1] + 1), dtype=np.float32)
     q[:, :-1] = queries
@@ -208,13 +214,21 @@ def _two_nearest(queries: np.ndarray, references: np.ndarray, reach: float | Non
     second = np.full(len(q), -1, dtype=np.int64)
     # One buffer reused by every block: fresh pages are slow on first touch.
     buffer = np.empty((min(MATCH_BLOCK_ROWS, len(q)), len(references)), dtype=np.float32)
+    with BLAS.limit(limits=1, user_api="blas"):
+        _blocks(q, r, q_sq, limit, buffer, first, second)
+    return first, second
+
+
+def _blocks(q, r, q_sq, limit, buffer, first, second) -> None:
+    """The block loop of :func:`_two_nearest`, filling ``first`` and ``second`` in place."""
+    n_references = r.shape[1]
     for start in range(0, len(q), MATCH_BLOCK_ROWS):
         stop = min(start + MATCH_BLOCK_ROWS, len(q))
         block = buffer[: stop - start]
         np.matmul(q[start:stop], r, out=block)
         j = block.argmin(axis=1)
         first[start:stop] = j
-        if len(references) < 2:
+        if n_references < 2:
             continue
         rows = np.arange(len(block))
         live = np.flatnonzero(block[rows, j] + q_sq[start:stop] <= limit)
@@ -222,7 +236,6 @@ def _two_nearest(queries: np.ndarray, references: np.ndarray, reach: float | Non
             continue
         block[live, j[live]] = np.inf
         second[start + live] = block[live].argmin(axis=1) if len(live) < len(block) else block.argmin(axis=1)
-    return first, second
 
 
 def _check_descriptors(features, which: str) -> np.ndarray:

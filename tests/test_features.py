@@ -161,3 +161,28 @@ def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
     )
     outputs = thread_outputs(script)
     assert len(outputs) == 1 and len(outputs.pop()) > 0
+
+
+def test_the_matcher_multiplies_on_one_blas_thread(monkeypatch):
+    """The matcher's block products run with numpy's BLAS held to one thread (faster on blocks this
+    small), and the limit is lifted afterwards."""
+    from helpers import features
+
+    seen = []
+    real = np.matmul
+
+    def spy(*args, **kwargs):
+        seen.append([m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"])
+        return real(*args, **kwargs)
+
+    before = [m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"]
+    assert before  # numpy's BLAS is found
+    rng = np.random.default_rng(3)
+    a = np.abs(rng.normal(size=(300, 33)))
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    monkeypatch.setattr(features.np, "matmul", spy)
+    pairs = features.match_features(a, a, 0.1, 0.97)
+    monkeypatch.undo()
+    assert np.array_equal(pairs, np.column_stack([np.arange(300), np.arange(300)]))  # each its own match
+    assert seen and all(threads == [1] * len(threads) for threads in seen)
+    assert [m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"] == before
