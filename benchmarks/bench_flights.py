@@ -102,11 +102,16 @@ def build_flight(options: dict):
     data = Dataset(LazyScans(Surface.from_height_field(field), poses, sensor), poses, waypoints, field,
                    IDENTITY_FRAME, sensor, name)  # fmt: skip
     config, _ = fit_to_flight(flight_of(data), Config(sensor=sensor))
-    for assignment in options["set"]:
+    return data, with_settings(config, options["set"])
+
+
+def with_settings(config, assignments):
+    """``config`` with each ``table.key=value`` of ``assignments`` set (numbers and true/false read as such)."""
+    for assignment in assignments:
         key, value = assignment.split("=", 1)
-        table, field_name = key.split(".")
-        config = config.with_values(**{table: {field_name: _value(value)}})
-    return data, config
+        table, name = key.split(".")
+        config = config.with_values(**{table: {name: _value(value)}})
+    return config
 
 
 def _value(text: str):

@@ -13,10 +13,11 @@ Levers (named combinations of existing options; ``reference`` is today's default
 
 Each lever runs the odometry of the default flight's first ``--scans`` accepted scans in a fresh process,
 once per ``--blas`` thread count (``OPENBLAS_NUM_THREADS`` of that process: numpy's BLAS, which the
-descriptor matcher and the robust fit use; ``threadpoolctl`` is not installed, so the count is fixed when
-the process starts). Open3D and small_gicp run on ``OMP_NUM_THREADS`` (1 unless set). Stage times are
-process CPU times (every thread's), taken where :mod:`helpers.frames` takes its wall times, so a busy
-machine slows them less than wall times; the wall time per scan is printed beside them.
+robust fit uses; the descriptor matcher holds it to one thread itself, ``helpers.features.BLAS``, so
+the count no longer reaches the matching column). Open3D and small_gicp run on ``OMP_NUM_THREADS`` (1
+unless set). Stage times are process CPU times (every thread's), taken where :mod:`helpers.frames` takes
+its wall times, so a busy machine slows them less than wall times; the wall time per scan is printed
+beside them.
 
 Per lever: CPU ms per accepted scan (mean) of FPFH (normals and descriptors), matching, the robust fit and
 ICP (downsampling and ICP's cloud preparation included), their total and the wall ms; the coarse fit's
@@ -49,6 +50,7 @@ COLUMNS = ("fpfh", "match", "msac", "icp")  # printed stages; downsampling is ad
 def child(options: dict) -> dict:
     """One lever's odometry, measured (runs in its own process)."""
     import numpy as np
+    from bench_flights import with_settings
 
     import helpers.frames as frames
     from helpers import create_dataset
@@ -57,11 +59,7 @@ def child(options: dict) -> dict:
     from helpers.odometry import STAGES, Odometry, accepted_indices, prepare
 
     frames.time = SimpleNamespace(perf_counter=time.process_time)  # the stages' clocks read CPU time
-    config = Config()
-    for assignment in options["set"]:
-        key, value = assignment.split("=", 1)
-        table, name = key.split(".")
-        config = config.with_values(**{table: {name: _value(value)}})
+    config = with_settings(Config(), options["set"])
     data = create_dataset(lazy=True)
     indices = accepted_indices(len(data), config)[: options["scans"]]
     scans = [data.scans[i] for i in indices]  # cast before the clocks start
@@ -92,15 +90,6 @@ def child(options: dict) -> dict:
         "rpe": float(rpe(result.poses, truth, 1).translation.rmse),
         "points": int(np.median([len(prepare(scans[i], config).points) for i in (0, len(scans) // 2)])),
     }
-
-
-def _value(text: str):
-    for kind in (int, float):
-        try:
-            return kind(text)
-        except ValueError:
-            pass
-    return text
 
 
 def main() -> None:

@@ -109,3 +109,14 @@ def outputs_on_1_and_2_threads(script: str) -> set[str]:
 @pytest.fixture()
 def thread_outputs():
     return outputs_on_1_and_2_threads
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """One headless Chromium for a test module's pages (tests/browser.py), or the module's browser tests skipped."""
+    from browser import CHROMIUM, Browser
+
+    if not CHROMIUM.exists():
+        pytest.skip(f"no browser at {CHROMIUM}: this check needs Debian's chromium (make test installs it as root)")
+    with Browser() as opened:
+        yield opened

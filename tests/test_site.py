@@ -21,7 +21,6 @@ from urllib.parse import unquote, urlsplit
 import nbformat
 import numpy as np
 import pytest
-from browser import CHROMIUM, Browser
 from PIL import Image
 
 from helpers.__main__ import main
@@ -377,14 +376,6 @@ def test_every_figure_a_notebook_draws_has_its_own_caption_and_alt_text(book):
 
 
 # In a headless browser, from disk: one Chromium for all pages.
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not CHROMIUM.exists():
-        pytest.skip(f"no browser at {CHROMIUM}: this check needs Debian's chromium (make test installs it as root)")
-    with Browser() as opened:
-        yield opened
 
 
 # Resolves, with the number of typeset formulas, once MathJax's first typesetting of the page has ended and

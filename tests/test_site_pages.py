@@ -16,7 +16,6 @@ from pathlib import Path
 import nbformat.v4
 import numpy as np
 import pytest
-from browser import CHROMIUM, Browser
 from PIL import Image
 from test_site import MATHJAX_DONE, _local, _parse, _pictures
 
@@ -158,14 +157,6 @@ def test_cells_jupyterlab_shows_folded_are_folded_in_the_book(small_book):
     assert len(folded) == 2, f"{len(folded)} folded parts"
     assert "# Check: folded" in folded[0] and FOLDED_OUTPUT in folded[0], "the folded check's cell is not folded"
     assert "shown" in folded[1] and "shown output" not in folded[1] and "shown output" in html, "input only"
-
-
-@pytest.fixture(scope="module")
-def browser():
-    if not CHROMIUM.exists():
-        pytest.skip(f"no browser at {CHROMIUM}: this check needs Debian's chromium (make test installs it as root)")
-    with Browser() as opened:
-        yield opened
 
 
 def test_the_hint_and_the_folded_cells_open_in_the_browser(small_book, browser):
