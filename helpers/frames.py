@@ -27,14 +27,20 @@ import numpy as np
 
 from .config import Config, RegistrationConfig
 from .errors import SlamError
+from .factors import constant_velocity_sigmas
 from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
+from .information import blended
 from .overlap import crop, cropped_cloud
 from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
+# A fit that ends far from the last motion beats ICP from the last motion only when it pairs 5 % more of the
+# points, or has 80 % of its RMSE or less: a drone does not jump, so a tie goes to the flight's momentum.
+BETTER_PAIRED = 0.05
+BETTER_RMSE = 0.8
 
 
 @dataclass
@@ -204,21 +210,26 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             )
             refined, T_coarse, constraint = retry, guess, constraint_retry
             T_fine, rmse = retry
-    # 5. On ground too flat to pin a slide along it, a result far from the last motion is a guess the scans
-    # cannot confirm (a lake or a field matches itself anywhere): ICP from the last motion, the flight's momentum.
+    # 5. A result far from the last motion: a drone cannot jump, so ICP from the last motion is the rival, and the
+    # fit is kept only when it pins the motion and fits clearly better (flat or repeating ground matches itself
+    # metres away: a lake, a field, a row of roofs).
     slide = float(np.linalg.norm((np.linalg.inv(guess) @ T_fine)[:3, 3]))
-    if (
-        momentum
-        and constraint < WEAK_CONSTRAINT
-        and slide > fit.tracking_max_jump_m
-        and not np.allclose(T_coarse, guess)
-    ):
-        fallback = (
-            f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {slide:.1f} m from the "
-            "last motion; ICP from the last motion kept"
-        )
-        refined, (_, constraint) = from_guess()
-        T_coarse, (T_fine, rmse) = guess, refined
+    if momentum and slide > fit.tracking_max_jump_m and not np.allclose(T_coarse, guess):
+        retry, (paired_retry, constraint_retry) = from_guess()
+        if not _clearly_better(rmse, paired, retry[1], paired_retry) or constraint < WEAK_CONSTRAINT:
+            why = (
+                f"ground too flat to pin the motion (constraint {constraint:.4f})"
+                if constraint < WEAK_CONSTRAINT
+                else f"no better fit (RMSE {rmse:.2f} against {retry[1]:.2f} m, {paired:.0%} against "
+                f"{paired_retry:.0%} of the points paired)"
+            )
+            fallback = f"the fit ended {slide:.1f} m from the last motion with {why}; ICP from the last motion kept"
+            refined, constraint = retry, constraint_retry
+            T_coarse, (T_fine, rmse) = guess, refined
+    # 6. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
+    # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
+    if momentum and constraint < WEAK_CONSTRAINT:
+        T_fine = _with_momentum(guess, refined, config)
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,
@@ -232,6 +243,30 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
         fallback,
         constraint=constraint,
         information=refined.information,
+    )
+
+
+def _with_momentum(guess: np.ndarray, refined, config: Config) -> np.ndarray:
+    """ICP's ``refined`` motion blended with the last motion ``guess``
+    (:func:`helpers.information.blended`): the guess is as sure as a drone's
+    ``[pose_graph] motion_acceleration`` allows over one step (the sigmas of the
+    motion factor). Without an information (point-to-point ICP), ICP's motion."""
+    if refined.information is None:
+        return refined[0]
+    table = config.pose_graph
+    step = max(float(np.linalg.norm(guess[:3, 3])), 1e-3)
+    sigmas = constant_velocity_sigmas(
+        step, table.motion_speed, table.motion_acceleration, np.radians(table.motion_angular_acceleration)
+    )
+    return blended(guess, refined[0], refined.information, sigmas)
+
+
+def _clearly_better(rmse: float, paired: float, rmse_rival: float, paired_rival: float) -> bool:
+    """Whether a registration (``rmse`` m, ``paired`` share) fits clearly better
+    than its rival: it pairs :data:`BETTER_PAIRED` more of the points, or has
+    :data:`BETTER_RMSE` of the rival's RMSE or less while pairing about as many."""
+    return paired > paired_rival + BETTER_PAIRED or (
+        rmse <= BETTER_RMSE * rmse_rival and paired >= paired_rival - BETTER_PAIRED / 2
     )
 
 

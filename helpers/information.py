@@ -99,3 +99,26 @@ def whitened(error, information) -> float:
     """The Mahalanobis norm (in sigmas) of a six-vector ``error`` (translation first) under ``information``."""
     e = np.asarray(error, dtype=float)
     return float(np.sqrt(max(e @ np.asarray(information, dtype=float) @ e, 0.0)))
+
+
+def blended(guess, measured, information, prior_sigmas) -> np.ndarray:
+    """The motion that best agrees with both a registration and a prior guess.
+
+    ``measured`` (4 x 4) is what ICP found, sure of it as its ``information``
+    says (6 x 6, translation first); ``guess`` (4 x 4) is the prior, sure of
+    itself to ``prior_sigmas`` (x y z m, rx ry rz rad). With ``d`` the
+    registration's offset from the guess (a tangent six-vector) the answer is
+    the guess moved by ``(H + P)^-1 H d``: the minimum of the two quadratic
+    costs. Along what the registration pins (``H`` large) it is the
+    registration; along what it does not (a slide over flat ground) it stays
+    with the guess.
+    """
+    import gtsam  # the one function here that needs it
+
+    start = gtsam.Pose3(np.asarray(guess, dtype=float))
+    offset = gtsam.Pose3.Logmap(start.between(gtsam.Pose3(np.asarray(measured, dtype=float))))  # rotation first
+    d = np.concatenate([offset[3:], offset[:3]])
+    H = np.asarray(information, dtype=float)
+    prior = np.diag(1.0 / np.asarray(prior_sigmas, dtype=float) ** 2)
+    step = np.linalg.solve(H + prior, H @ d)
+    return start.compose(gtsam.Pose3.Expmap(np.concatenate([step[3:], step[:3]]))).matrix()

@@ -8,7 +8,7 @@ from helpers.errors import SlamError
 from helpers.factors import Edge
 from helpers.geometry import transform_points
 from helpers.icp import icp_cloud, refine_icp
-from helpers.information import MAX_SIGMA, calibrated, plane_information, weakest, whitened
+from helpers.information import MAX_SIGMA, blended, calibrated, plane_information, weakest, whitened
 from helpers.odometry import OdometryResult
 from helpers.slam import build_pose_graph
 
@@ -229,3 +229,24 @@ def test_an_unknown_information_source_is_refused():
             information="lidar",
             **ICP,
         )
+
+
+def test_a_blend_keeps_the_guess_where_the_registration_knows_nothing():
+    """Over flat ground ICP pins height and tilt, not a slide: the blend of its
+    answer with the last motion takes the registration's height and the
+    guess's position along the ground, and tends to either one as the other
+    knows nothing."""
+    guess = np.eye(4)
+    guess[:3, 3] = [2.0, 0.0, 0.0]
+    measured = np.eye(4)
+    measured[:3, 3] = [1.5, 0.3, 0.1]  # slid back and sideways, and 10 cm higher
+    sure, unsure = 1e12, 1e-12
+    flat = np.diag([unsure, unsure, sure, sure, sure, unsure])  # x y z rx ry rz
+    prior = np.array([0.04] * 3 + [0.01] * 3)
+    out = blended(guess, measured, flat, prior)
+    np.testing.assert_allclose(out[:3, 3], [2.0, 0.0, 0.1], atol=1e-6)
+    np.testing.assert_allclose(blended(guess, measured, np.eye(6) * sure, prior), measured, atol=1e-6)
+    np.testing.assert_allclose(blended(guess, measured, np.eye(6) * unsure, prior), guess, atol=1e-6)
+    # Equally sure: halfway (to first order in the offset).
+    even = np.diag(1.0 / prior**2)
+    np.testing.assert_allclose(blended(guess, measured, even, prior)[:3, 3], [1.75, 0.15, 0.05], atol=1e-3)

@@ -5,8 +5,9 @@ import pytest
 
 from helpers.config import Config, noise_seed_from_environment
 from helpers.errors import SlamError
+from helpers.icp import WEAK_CONSTRAINT
 from helpers.metrics import ate, rpe
-from helpers.odometry import Frame, prepare, register_frames, run_odometry
+from helpers.odometry import Frame, predicted_motion, prepare, register_frames, run_odometry
 
 WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
 
@@ -119,10 +120,12 @@ def test_tracking_registers_like_the_global_workflow_without_its_features(flight
 
 def test_tracking_hands_doubtful_steps_to_the_global_workflow(flight):
     """With a jump limit no real motion change passes, every step after the first is checked, found
-    doubtful and registered globally: the result equals the reference's odometry."""
-    strict = dict(mode="tracking", tracking_max_jump_m=1e-9, tracking_max_jump_deg=1e-9)
-    doubtful = run_odometry(flight.scans[:30], flight.poses[0], Config().with_values(registration=strict))
-    reference = run_odometry(flight.scans[:30], flight.poses[0], Config())
+    doubtful and registered globally: the result equals the global workflow's odometry (with the same
+    limit, which it also reads: a fit that ends farther from the last motion meets ICP from it)."""
+    strict = dict(tracking_max_jump_m=1e-9, tracking_max_jump_deg=1e-9)
+    tracking = Config().with_values(registration={**strict, "mode": "tracking"})
+    doubtful = run_odometry(flight.scans[:30], flight.poses[0], tracking)
+    reference = run_odometry(flight.scans[:30], flight.poses[0], Config().with_values(registration=strict))
     assert not doubtful.tracked.any()
     np.testing.assert_allclose(doubtful.relative, reference.relative, atol=1e-9)
 
@@ -171,3 +174,50 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     pair = register_frames(moving, fixed, config, guess=truth)
     assert "too flat" in (pair.fallback or ""), pair.fallback
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.5
+
+
+def test_on_repeating_ground_a_fit_one_ridge_off_loses_to_the_last_motion(grid_tile, tmp_path, monkeypatch):
+    """Ridges every 6 m across the track and waves along it pin every
+    direction, yet a fit one ridge off (forced here) pairs as much of the
+    scan as the truth and ICP settles there. The registration must run ICP
+    from the last motion too and, the fit being no better, keep the flight's
+    momentum: a drone does not jump 6 m sideways between two scans."""
+    import helpers
+    import helpers.frames as frames
+
+    def ridges(x, y):
+        return 100.0 + 1.5 * np.sin(2 * np.pi * y / 6.0) + 2.0 * np.sin(2 * np.pi * x / 23.0)
+
+    tile = grid_tile("ridges.las", 300.0, 200.0, ridges)
+    flight = tmp_path / "flight.csv"
+    np.savetxt(flight, np.column_stack([np.arange(-30.0, 30.0, 2.0), np.zeros(30)]), delimiter=",")
+    data = helpers.create_dataset(tile, flight)
+    config = Config()
+    truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
+    far = truth.copy()
+    far[:3, 3] += [0.0, 6.0, 0.0]  # one ridge over
+    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
+    pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
+    assert pair.constraint > WEAK_CONSTRAINT, pair.constraint  # the ground pins the motion: not the flat case
+    assert "last motion kept" in (pair.fallback or ""), pair.fallback
+    assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.3
+
+
+def test_the_guess_ignores_one_wrong_step():
+    """The constant-velocity guess is the medoid of the last three steps: a
+    steady flight gives its newest step, one step 6 m off is ignored, and
+    fewer than three steps give the last."""
+    step = np.eye(4)
+    step[:3, 3] = [2.0, 0.0, 0.0]
+    wrong = step.copy()
+    wrong[:3, 3] = [8.0, 0.0, 0.0]
+    assert predicted_motion([]) is None
+    assert predicted_motion([step, wrong]) is wrong
+    assert predicted_motion([step, step.copy(), wrong]) is not wrong
+    faster = step.copy()
+    faster[:3, 3] = [2.1, 0.0, 0.0]
+    steady = [step, step.copy(), faster]
+    np.testing.assert_allclose(predicted_motion(steady)[:3, 3], [2.0, 0.0, 0.0])
+    newest = step.copy()
+    assert predicted_motion([step, step.copy(), newest]) is newest
