@@ -1,7 +1,7 @@
 """The motion factor and GNSS fixes on whole flights: ATE with and without each.
 
     nice -n 10 .venv/bin/python benchmarks/bench_motion.py [--flights default-700 default-150 ...]
-        [--scans N] [--swing 0.3] [--gnss-sigma 2]
+        [--scans N] [--swing 0.3] [--gnss-sigma 2] [--set registration.icp_local_map=6 ...]
 
 Each flight (``benchmarks/bench_bias.py``'s scenes and heights, parameters
 fitted as ``run`` fits them) is registered once by :class:`helpers.slam.Slam`;
@@ -12,7 +12,8 @@ resamples the waypoints so that their spacing, the drone's speed, swings by
 this share around the flight's own (a sine over ``SWING_PERIOD`` m of track).
 Prints ATE (m, optimised) per variant and the pose graph's time. ``--edges M,DEG``
 adds lidar only and GNSS with other fixed edge sigmas (how much the fixes'
-effect depends on how sure the edges say they are).
+effect depends on how sure the edges say they are); ``--set table.key=value``
+changes a configuration value after fitting, as ``bench_flights.py``'s does.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 
 import numpy as np
 from bench_bias import FLIGHTS, surface_of
+from bench_flights import with_settings
 
 from helpers import SensorConfig
 from helpers.config import Config
@@ -56,9 +58,9 @@ def swung(xy: np.ndarray, share: float) -> np.ndarray:
     return np.column_stack([np.interp(stations, along, xy[:, 0]), np.interp(stations, along, xy[:, 1])])
 
 
-def flight(name: str, scans: int | None, swing: float, variant: str = "tile"):
-    scene, above, first = FLIGHTS[name]
-    field, xy = surface_of(scene, variant)
+def flight(name: str, scans: int | None, swing: float, variant: str | None = None, settings=()):
+    scene, above, first, own = FLIGHTS[name]
+    field, xy = surface_of(scene, variant or own)
     if swing:
         xy = swung(xy, swing)
     ground = float(np.median(field.z[field.cell_of(xy)]))
@@ -69,7 +71,7 @@ def flight(name: str, scans: int | None, swing: float, variant: str = "tile"):
     data = Dataset(LazyScans(Surface.from_height_field(field), poses, sensor), poses, waypoints, field,
                    IDENTITY_FRAME, sensor, name)  # fmt: skip
     config, _ = fit_to_flight(flight_of(data), Config(sensor=sensor))
-    return data, config
+    return data, with_settings(config, settings)
 
 
 def main() -> None:
@@ -78,14 +80,15 @@ def main() -> None:
     parser.add_argument("--scans", type=int, default=None, help="the first N scans only (default: all)")
     parser.add_argument("--swing", type=float, default=0.0, help="speed swing, a share (0.3: +-30 %%)")
     parser.add_argument("--gnss-sigma", type=float, default=2.0, help="m, horizontal and vertical")
-    parser.add_argument("--variant", default="tile", help="bench_bias.surface_of's: tile, sparse (the default scene "
-                        "resampled at a real tile's density), linear, smooth")  # fmt: skip
+    parser.add_argument("--variant", default=None, help="bench_bias.surface_of's: tile, sparse (the default scene "
+                        "resampled at a real tile's density), linear, smooth (default: the flight's own)")  # fmt: skip
     parser.add_argument(
         "--edges", help="M,DEG: also lidar only and GNSS with these [pose_graph] edge sigmas (m and deg per step)"
     )
+    parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
     args = parser.parse_args()
     for name in args.flights:
-        data, config = flight(name, args.scans, args.swing, args.variant)
+        data, config = flight(name, args.scans, args.swing, args.variant, args.set)
         start = time.perf_counter()
         slam = Slam(config, anchor=data.poses[0])
         for index in range(len(data)):
@@ -99,8 +102,8 @@ def main() -> None:
         gnss = GnssFixes(np.arange(len(data)), fixes, np.full(3, args.gnss_sigma))
         steps = np.linalg.norm(np.diff(truth[:, :3, 3], axis=0), axis=1)
         print(
-            f"{name}{' swing ' + str(args.swing) if args.swing else ''} ({args.variant}): {len(data)} scans, "
-            f"{len(indices)} nodes, "
+            f"{name}{' swing ' + str(args.swing) if args.swing else ''} ({args.variant or FLIGHTS[name][3]}): "
+            f"{len(data)} scans, {len(indices)} nodes, "
             f"step {steps.min():.2f}-{steps.max():.2f} m, {len(slam.loops.loops)} loops, "
             f"ATE odometry {ate(odometry.poses, truth).rmse:.3f} m; registered in {registered:.0f} s"
         )

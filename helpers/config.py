@@ -123,14 +123,25 @@ class RegistrationConfig(BoundedTable):
         1e-3, "ICP stops earlier once an iteration changes its RMSE (m) and inlier share by less"
     )
     icp_fallback_rmse: float = param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
+    icp_local_map: int = param(
+        1, "scans merged into the cloud ICP registers each scan onto: 1 the previous scan (the reference), n the last n"
+    )
     overlap_crop: bool = param(
         True, "ICP leaves out the moving points that land beyond the fixed scan's footprint (false: the reference)"
+    )
+    motion_guard: bool = param(
+        True,
+        "the last motion guards each step: the guess is the medoid of the last three steps, a fit that ends "
+        "tracking_max_jump_m from it must fit clearly better than ICP from it, and what weak ground does not pin "
+        "follows it (false: the reference)",
     )
     mode: str = param(
         "global", "global: features and a robust fit for every scan (the reference); tracking: ICP from the last motion"
     )
     tracking_max_jump_m: float = param(
-        1.0, "tracking: a step that ends this far (m) from the last motion is registered globally"
+        1.0,
+        "a step that ends this far (m) from the last motion is doubted (tracking: registered globally; global: "
+        "ICP from the last motion too)",
     )
     tracking_max_jump_deg: float = param(6.0, "tracking: ... or turns this much (deg) more or less than it")
     tracking_min_overlap: float = param(
@@ -156,7 +167,9 @@ class RegistrationConfig(BoundedTable):
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
         self._between("icp_tolerance", 0.0, 1.0, "zero or a positive number (above 1 ICP stops at once)")
         self._between("icp_fallback_rmse", MIN_RMSE, MAX_LENGTH, "a positive number of metres")
+        self._within("icp_local_map", 1, MAX_EDGES_BACK)
         self._check("overlap_crop", lambda v: isinstance(v, bool), "true or false")
+        self._check("motion_guard", lambda v: isinstance(v, bool), "true or false")
         self._one_of("mode", MODES)
         self._between("tracking_max_jump_m", 0.0, MAX_LENGTH, "zero or a positive number of metres")
         self._between("tracking_max_jump_deg", 0.0, 180.0, "zero or a positive number of degrees")
@@ -263,7 +276,7 @@ class Config:
 
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
-    "registration": {"icp_grid_step": 0.0, "overlap_crop": False},
+    "registration": {"icp_grid_step": 0.0, "overlap_crop": False, "motion_guard": False},
     "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth", "skip_after_loop": 0},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }

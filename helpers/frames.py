@@ -210,25 +210,28 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             )
             refined, T_coarse, constraint = retry, guess, constraint_retry
             T_fine, rmse = retry
-    # 5. A result far from the last motion: a drone cannot jump, so ICP from the last motion is the rival, and the
-    # fit is kept only when it pins the motion and fits clearly better (flat or repeating ground matches itself
-    # metres away: a lake, a field, a row of roofs).
+    # 5. A result far from the last motion is doubted: a drone does not jump, and flat or repeating ground (a
+    # lake, a field, a row of roofs) matches itself metres away. On ground too flat to pin the motion, ICP from the
+    # last motion is kept; with the motion guard on, it is the fit's rival anywhere, and the fit must fit clearly
+    # better to stay.
     slide = float(np.linalg.norm((np.linalg.inv(guess) @ T_fine)[:3, 3]))
-    if momentum and slide > fit.tracking_max_jump_m and not np.allclose(T_coarse, guess):
+    weak = constraint < WEAK_CONSTRAINT
+    if momentum and (weak or fit.motion_guard) and slide > fit.tracking_max_jump_m and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
-        if not _clearly_better(rmse, paired, retry[1], paired_retry) or constraint < WEAK_CONSTRAINT:
-            why = (
-                f"ground too flat to pin the motion (constraint {constraint:.4f})"
-                if constraint < WEAK_CONSTRAINT
-                else f"no better fit (RMSE {rmse:.2f} against {retry[1]:.2f} m, {paired:.0%} against "
-                f"{paired_retry:.0%} of the points paired)"
+        if weak or not _clearly_better(rmse, paired, retry[1], paired_retry):
+            fallback = (
+                f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {slide:.1f} m from "
+                "the last motion; ICP from the last motion kept"
+                if weak
+                else f"the fit ended {slide:.1f} m from the last motion and fits no better than ICP from it (RMSE "
+                f"{rmse:.2f} against {retry[1]:.2f} m, {paired:.0%} against {paired_retry:.0%} of the points "
+                "paired); ICP from the last motion kept"
             )
-            fallback = f"the fit ended {slide:.1f} m from the last motion with {why}; ICP from the last motion kept"
             refined, constraint = retry, constraint_retry
             T_coarse, (T_fine, rmse) = guess, refined
     # 6. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
-    if momentum and constraint < WEAK_CONSTRAINT:
+    if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
         T_fine = _with_momentum(guess, refined, config)
     timings["icp"] = _ms(start)
     return PairRegistration(

@@ -11,15 +11,19 @@ it over a whole flight.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
+import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .config import Config
 from .errors import SlamError
+from .features import grid_average
 from .frames import STAGES, Frame, PairRegistration, describe, prepare, register_frames, register_pair, track_frames
-from .geometry import check_points, check_pose
+from .geometry import check_points, check_pose, transform_points
+from .icp import icp_cloud
 from .icp_service import IcpService
 from .progress import progress_bar
 
@@ -76,13 +80,22 @@ class Odometry:
         self._timings: list[dict] = []
         self.fallbacks: list[tuple[int, str]] = []
         self._previous: Frame | None = None
+        self._recent: list[Frame] = []  # the last [registration] icp_local_map frames, oldest first
         self._tracking = config.registration.mode == "tracking"
 
     def register(self, frame: Frame, index: int) -> PairRegistration | None:
         """Register ``frame`` (dataset scan ``index``) onto the previous frame and chain its pose."""
         config, previous = self.config, self._previous
-        motion = predicted_motion(self.relative)
+        start = time.perf_counter()
+        if previous is not None and len(self._recent) > 1:
+            previous = local_map(previous, self._recent, self.poses[-len(self._recent) :], config)
+        mapped_ms = 1000.0 * (time.perf_counter() - start)
+        if config.registration.motion_guard:
+            motion = predicted_motion(self.relative)
+        else:  # the reference's: the last step
+            motion = self.relative[-1] if self.relative else None
         timings, pair = dict.fromkeys(STAGES, 0.0), None
+        timings["icp"] += mapped_ms  # the local map is made for ICP
         if previous is not None:
             # 1. Tracking: ICP from the last motion; the global registration only if that fails its checks.
             doubt = ""
@@ -111,6 +124,7 @@ class Odometry:
         self._timings.append(timings)
         self.indices.append(int(index))
         self._previous = frame
+        self._recent = [*self._recent, frame][-config.registration.icp_local_map :]
         return pair
 
     def result(self) -> OdometryResult:
@@ -129,6 +143,29 @@ class Odometry:
             constraint=np.array([p.constraint for p in pairs], dtype=float),
             information=[p.information for p in pairs],
         )
+
+
+def local_map(previous: Frame, recent: list[Frame], poses: list[np.ndarray], config: Config) -> Frame:
+    """``previous`` with the ICP cloud of its neighbourhood: the ICP points of
+    the ``recent`` frames (oldest first, ``previous`` last) carried into
+    ``previous``'s frame by their odometry ``poses`` and averaged on the ICP
+    grid (``[registration] icp_grid_step``; the feature grid when it is 0).
+
+    A scan's points lie in rows, one per ray elevation, at the same place in
+    every scan's frame; over ground with little relief ICP pulls the rows of
+    one scan onto those of the last, and steps come out a few per cent short
+    (4 % at 250 m above Autzen, where the rows are 0.87 m apart). The rows of
+    the scans before fall elsewhere: a map of several scans has none to lock
+    onto. Its features stay the previous scan's (the coarse fit is scan to scan).
+    """
+    fit = config.registration
+    to_previous = np.linalg.inv(poses[-1])
+    points = np.vstack(
+        [transform_points(frame.icp_points, to_previous @ pose) for frame, pose in zip(recent, poses, strict=True)]
+    )
+    step = fit.icp_grid_step if fit.icp_grid_step > 0 else config.features.grid_step
+    merged = grid_average(points, step)
+    return dataclasses.replace(previous, icp_points=merged, icp=icp_cloud(merged, fit.metric, fit.icp_backend))
 
 
 def predicted_motion(relative: list[np.ndarray], window: int = 3) -> np.ndarray | None:

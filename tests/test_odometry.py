@@ -7,7 +7,7 @@ from helpers.config import Config, noise_seed_from_environment
 from helpers.errors import SlamError
 from helpers.icp import WEAK_CONSTRAINT
 from helpers.metrics import ate, rpe
-from helpers.odometry import Frame, predicted_motion, prepare, register_frames, run_odometry
+from helpers.odometry import Frame, local_map, predicted_motion, prepare, register_frames, run_odometry
 
 WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
 
@@ -221,3 +221,39 @@ def test_the_guess_ignores_one_wrong_step():
     np.testing.assert_allclose(predicted_motion(steady)[:3, 3], [2.0, 0.0, 0.0])
     newest = step.copy()
     assert predicted_motion([step, step.copy(), newest]) is newest
+
+
+def test_the_local_map_holds_the_last_scans_in_the_previous_frame(flight):
+    """Three scans carried into the last one's frame by their true poses:
+    the local map covers all three footprints (it reaches back along the
+    track as far as the oldest scan lies behind), every point of it lies
+    where the scans' own points do (within the ICP grid), and its features
+    stay the previous scan's."""
+    config = Config()
+    step = config.registration.icp_grid_step
+    ids = [30, 33, 36]
+    frames = [prepare(flight.scans[k], config) for k in ids]
+    poses = [flight.poses[k] for k in ids]
+    merged = local_map(frames[-1], frames, poses, config)
+    assert merged.features is frames[-1].features and merged.points is frames[-1].points
+    in_world = lambda pts, pose: pts @ pose[:3, :3].T + pose[:3, 3]  # noqa: E731
+    union = np.vstack([in_world(f.icp_points, p) for f, p in zip(frames, poses, strict=True)])
+    mapped = in_world(merged.icp_points, poses[-1])
+    from scipy.spatial import cKDTree
+
+    nearest, _ = cKDTree(union).query(mapped)
+    assert np.percentile(nearest, 99) < step, np.percentile(nearest, 99)
+    back = np.linalg.norm(poses[-1][:3, 3] - poses[0][:3, 3])  # how far behind the oldest scan lies
+    along = (merged.icp_points[:, 0].min(), frames[-1].icp_points[:, 0].min())
+    assert along[1] - along[0] > 0.8 * back, along  # the map reaches that far further back than the scan
+    assert merged.icp is not None and len(merged.icp.points) == len(merged.icp_points)
+
+
+def test_odometry_on_a_local_map_stays_on_the_truth(flight, odometry):
+    """ICP onto the last four scans merged: the steps stay within the
+    scan-to-scan bound, and the trajectory no worse than the scan-to-scan
+    one by more than a tenth."""
+    mapped = run_odometry(flight, flight.poses[0], Config().with_values(registration={"icp_local_map": 4}))
+    truth = flight.poses[mapped.indices]
+    assert rpe(mapped.poses, truth).translation.max < STEP_BOUND_M
+    assert ate(mapped.poses, truth).rmse <= 1.1 * ate(odometry.poses, truth).rmse + 0.02
