@@ -47,6 +47,14 @@ GRID_ROUNDING = 0.05  # m: fitted grid steps are multiples of this
 # Five cells leave the reference's values room on flights four times lower than its own (150 m: a 13 m strip).
 GRID_CELLS_ACROSS = 5
 GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("map", "align_grid_step"))
+# Where every scan is accepted (skip_frames 1: a flight under half the reference's height at its spacing), the
+# scans' ray rows lie about one ICP cell apart, and scan-to-scan ICP over ground with little relief pulls one
+# scan's rows onto the last one's: steps come out short and turns too small (4 % and 0.1 deg a step at 250 m
+# above Autzen), and the edges back, scan to scan too, add the same pull with more weight. There each scan is
+# registered onto a local map of the last LOW_FLIGHT_LOCAL_MAP scans, whose rows interleave, and the edges back
+# (which measure the same scans again) are left out. Six scans, 12 m of flight, measured on Autzen at 150 and
+# 250 m and on a sparse tile at 150 m (benchmarks/bench_motion.py): three left half the bias, twelve no better.
+LOW_FLIGHT_LOCAL_MAP = 6
 
 
 @dataclass(frozen=True)
@@ -135,6 +143,13 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
             f"({k:.2f} x the reference's {REFERENCE_LOOP_AGE:.0f} m)",
         ),
     }
+    if skip == 1:
+        wanted[("registration", "icp_local_map")] = (
+            LOW_FLIGHT_LOCAL_MAP,
+            "every scan is accepted, its ray rows about one ICP cell apart: ICP registers onto the last "
+            f"{LOW_FLIGHT_LOCAL_MAP} scans merged, whose rows interleave (the reference: the previous scan)",
+        )
+        wanted[("pose_graph", "edges_back")] = (1, "the local map already holds the scans the edges back would measure")
     changes, reasons = {}, []
     for (table, key), (value, why) in wanted.items():
         if (table, key) in keep:

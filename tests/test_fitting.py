@@ -30,6 +30,9 @@ def test_a_low_flight_gets_the_footprint_lengths():
     assert fitted.registration.inlier_distance == 2.0
     assert fitted.loop_closure.sub_map_thresh == round(270 / 4 / (3 * 1 * 2.0))  # 67.5 m back: 11 submaps
     assert any("a loop candidate lies 66 m of flight back" in line for line in reasons)
+    # every scan accepted: ICP onto the last six scans merged, and no edges back (the map holds their scans)
+    assert fitted.registration.icp_local_map == 6 and fitted.pose_graph.edges_back == 1
+    assert len(reasons) == 9
     # the rest is the reference's
     untouched = ("neighbors", "match_threshold", "match_ratio")
     assert all(getattr(fitted.features, k) == getattr(Config().features, k) for k in untouched)
@@ -42,6 +45,7 @@ def test_a_high_flight_with_sparse_waypoints():
     assert fitted.registration.skip_frames == 3  # twice the strip, waypoints twice as far apart
     assert fitted.features.grid_step == 3.0 and fitted.registration.inlier_distance == 6.0
     assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
+    assert fitted.registration.icp_local_map == 1 and fitted.pose_graph.edges_back == Config().pose_graph.edges_back
 
 
 def test_what_the_user_set_is_kept():

@@ -1,4 +1,5 @@
-"""Steps as long as the true ones: the overlap crop (helpers.overlap) on flights whose truth is known.
+"""Steps as long as the true ones: the overlap crop (helpers.overlap) and, on low flights, the local map
+(helpers.odometry.local_map) on flights whose truth is known.
 
 ICP fed the whole moving scan pairs its leading edge, which the fixed scan never saw, with the fixed
 scan's edge and comes out short every step, the same way (issue 21). The flights are
@@ -126,3 +127,9 @@ def test_steps_are_unbiased_150_m_above_a_sparse_tile():
 def test_steps_are_unbiased_150_m_above_autzen(autzen):
     """The real tile, 150 m above its ground (skipped when the tile is not beside the repository)."""
     check_unbiased(*step_ratios("autzen-150"))
+
+
+def test_steps_are_unbiased_250_m_above_autzen(autzen):
+    """The real tile, 250 m above its ground, where the ray rows lie about one ICP cell apart and scan-to-scan
+    ICP locked onto them (4 % short): the fitted local map of the last scans leaves no rows to lock onto."""
+    check_unbiased(*step_ratios("autzen-250"))
