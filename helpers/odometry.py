@@ -34,6 +34,7 @@ __all__ = [
     "Frame",
     "Odometry",
     "OdometryResult",
+    "local_map",
     "predicted_motion",
     "prepare",
     "register_frames",
@@ -171,7 +172,7 @@ def local_map(previous: Frame, recent: list[Frame], poses: list[np.ndarray], con
 def predicted_motion(relative: list[np.ndarray], window: int = 3) -> np.ndarray | None:
     """The constant-velocity guess for the next step: of the last ``window``
     steps (4 x 4 each), the one nearest the others (the medoid of their
-    translations), or the last when fewer were made (None before any).
+    translations), or the last when fewer than three were made (None before any).
 
     A drone cannot change its velocity much from one scan to the next, so the
     last step is the natural guess; but one step that slid off the truth
