@@ -49,11 +49,12 @@ GRID_CELLS_ACROSS = 5
 GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("map", "align_grid_step"))
 # Where every scan is accepted (skip_frames 1: a flight under half the reference's height at its spacing), the
 # scans' ray rows lie about one ICP cell apart, and scan-to-scan ICP over ground with little relief pulls one
-# scan's rows onto the last one's: steps come out short and turns too small (4 % and 0.1 deg a step at 250 m
-# above Autzen), and the edges back, scan to scan too, add the same pull with more weight. There each scan is
-# registered onto a local map of the last LOW_FLIGHT_LOCAL_MAP scans, whose rows interleave, and the edges back
-# (which measure the same scans again) are left out. Six scans, 12 m of flight, measured on Autzen at 150 and
-# 250 m and on a sparse tile at 150 m (benchmarks/bench_motion.py): three left half the bias, twelve no better.
+# scan's rows onto the last one's: steps come out short and turns too small (4 % short at 250 m above Autzen,
+# turns 0.13 deg a step too small at 150 m), and the edges back, scan to scan too, add the same pull with more
+# weight. There each scan is registered onto a local map of the last LOW_FLIGHT_LOCAL_MAP scans, whose rows
+# interleave, and the edges back (which measure the same scans again) are left out. Six scans, 12 m of flight,
+# measured on Autzen at 150 and 250 m and on a sparse tile at 150 m (benchmarks/bench_motion.py): three left
+# half the bias, twelve no better.
 LOW_FLIGHT_LOCAL_MAP = 6
 
 
