@@ -251,6 +251,13 @@ def constant_velocity_sigmas(step_m: float, speed: float, acceleration: float, a
     return np.array([acceleration * dt**2] * 3 + [angular_acceleration * dt**2] * 3)
 
 
+def motion_sigmas(step_m: float, table) -> np.ndarray:
+    """:func:`constant_velocity_sigmas` for nodes ``step_m`` apart, with the speed and accelerations of
+    ``table`` (``[pose_graph]``; its angular acceleration is in deg/s^2)."""
+    angular = np.radians(table.motion_angular_acceleration)
+    return constant_velocity_sigmas(step_m, table.motion_speed, table.motion_acceleration, angular)
+
+
 def motion_factors(relative, table) -> list[ConstantVelocityFactor]:
     """A :class:`ConstantVelocityFactor` over every three consecutive nodes of a chain whose odometry steps
     are ``relative`` ((K-1, 4, 4)), with the accelerations of ``table`` (``[pose_graph]``): the step between
@@ -259,8 +266,7 @@ def motion_factors(relative, table) -> list[ConstantVelocityFactor]:
     if len(relative) < 2:
         return []
     step = max(float(np.median(np.linalg.norm(relative[:, :3, 3], axis=1))), 1e-3)
-    angular = np.radians(table.motion_angular_acceleration)
-    sigmas = constant_velocity_sigmas(step, table.motion_speed, table.motion_acceleration, angular)
+    sigmas = motion_sigmas(step, table)
     return [ConstantVelocityFactor(k - 2, k - 1, k, sigmas) for k in range(2, len(relative) + 1)]
 
 

@@ -27,7 +27,7 @@ import numpy as np
 
 from .config import Config, RegistrationConfig
 from .errors import SlamError
-from .factors import constant_velocity_sigmas
+from .factors import motion_sigmas
 from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points, rotation_angle_deg
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
@@ -256,11 +256,7 @@ def _with_momentum(guess: np.ndarray, refined, config: Config) -> np.ndarray:
     motion factor). Without an information (point-to-point ICP), ICP's motion."""
     if refined.information is None:
         return refined[0]
-    table = config.pose_graph
-    step = max(float(np.linalg.norm(guess[:3, 3])), 1e-3)
-    sigmas = constant_velocity_sigmas(
-        step, table.motion_speed, table.motion_acceleration, np.radians(table.motion_angular_acceleration)
-    )
+    sigmas = motion_sigmas(max(float(np.linalg.norm(guess[:3, 3])), 1e-3), config.pose_graph)
     return blended(guess, refined[0], refined.information, sigmas)
 
 

@@ -80,16 +80,17 @@ class Odometry:
         self._pairs: list[PairRegistration] = []
         self._timings: list[dict] = []
         self.fallbacks: list[tuple[int, str]] = []
-        self._previous: Frame | None = None
-        self._recent: list[Frame] = []  # the last [registration] icp_local_map frames, oldest first
+        self._recent: list[Frame] = []  # the last [registration] icp_local_map frames, oldest first: the previous last
         self._tracking = config.registration.mode == "tracking"
 
     def register(self, frame: Frame, index: int) -> PairRegistration | None:
         """Register ``frame`` (dataset scan ``index``) onto the previous frame and chain its pose."""
-        config, previous = self.config, self._previous
+        config, recent = self.config, self._recent
         start = time.perf_counter()
-        if previous is not None and len(self._recent) > 1:
-            previous = local_map(previous, self._recent, self.poses[-len(self._recent) :], config)
+        if len(recent) > 1:  # the previous frame with the last scans merged for ICP
+            previous = local_map(recent, self.poses[-len(recent) :], config)
+        else:
+            previous = recent[-1] if recent else None
         mapped_ms = 1000.0 * (time.perf_counter() - start)
         if config.registration.motion_guard:
             motion = predicted_motion(self.relative)
@@ -124,8 +125,7 @@ class Odometry:
             timings[stage] += ms
         self._timings.append(timings)
         self.indices.append(int(index))
-        self._previous = frame
-        self._recent = [*self._recent, frame][-config.registration.icp_local_map :]
+        self._recent = [*recent, frame][-config.registration.icp_local_map :]
         return pair
 
     def result(self) -> OdometryResult:
@@ -146,10 +146,10 @@ class Odometry:
         )
 
 
-def local_map(previous: Frame, recent: list[Frame], poses: list[np.ndarray], config: Config) -> Frame:
-    """``previous`` with the ICP cloud of its neighbourhood: the ICP points of
-    the ``recent`` frames (oldest first, ``previous`` last) carried into
-    ``previous``'s frame by their odometry ``poses`` and averaged on the ICP
+def local_map(recent: list[Frame], poses: list[np.ndarray], config: Config) -> Frame:
+    """The last of the ``recent`` frames (oldest first), the previous scan,
+    with the ICP cloud of its neighbourhood: the ICP points of all of them
+    carried into its frame by their odometry ``poses`` and averaged on the ICP
     grid (``[registration] icp_grid_step``; the feature grid when it is 0).
 
     A scan's points lie in rows, one per ray elevation, at the same place in
@@ -166,7 +166,7 @@ def local_map(previous: Frame, recent: list[Frame], poses: list[np.ndarray], con
     )
     step = fit.icp_grid_step if fit.icp_grid_step > 0 else config.features.grid_step
     merged = grid_average(points, step)
-    return dataclasses.replace(previous, icp_points=merged, icp=icp_cloud(merged, fit.metric, fit.icp_backend))
+    return dataclasses.replace(recent[-1], icp_points=merged, icp=icp_cloud(merged, fit.metric, fit.icp_backend))
 
 
 def predicted_motion(relative: list[np.ndarray], window: int = 3) -> np.ndarray | None:

@@ -234,7 +234,7 @@ def test_the_local_map_holds_the_last_scans_in_the_previous_frame(flight):
     ids = [30, 33, 36]
     frames = [prepare(flight.scans[k], config) for k in ids]
     poses = [flight.poses[k] for k in ids]
-    merged = local_map(frames[-1], frames, poses, config)
+    merged = local_map(frames, poses, config)
     assert merged.features is frames[-1].features and merged.points is frames[-1].points
     in_world = lambda pts, pose: pts @ pose[:3, :3].T + pose[:3, 3]  # noqa: E731
     union = np.vstack([in_world(f.icp_points, p) for f, p in zip(frames, poses, strict=True)])
