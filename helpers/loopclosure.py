@@ -176,7 +176,14 @@ class LoopCloser:
             settings,
             covariances=covariances,
             extents=extents,
-            closed=closed_places(self.loops, node, settings.skip_after_loop, submaps.n_scans_per_submap),
+            closed=closed_places(
+                self.loops,
+                node,
+                settings.skip_after_loop,
+                submaps.n_scans_per_submap,
+                centres=centres[: eligible_submaps(len(submaps), settings)],
+                radius=settings.loop_closure_search_radius + (0.0 if extents is None else extents),
+            ),
         )
         if candidates.closed:
             self.skipped += 1
@@ -212,7 +219,7 @@ class LoopCloser:
     def _uncertain_centres(self, position: np.ndarray, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For the gate, from the scan at ``position``: each eligible submap's
         centre covariance (exact where the gate may let it in, carried over
-        elsewhere); every submap's centre, the eligible ones where the graph
+        elsewhere, NaN outside the graph's window); every submap's centre, the eligible ones where the graph
         puts them (the odometry's, moved by the loop edges found); and each
         eligible submap's extent beyond the fixed radius, how far its scans lie
         from its centre (a scan over any of them overlaps it)."""
@@ -228,7 +235,9 @@ class LoopCloser:
 
         covariances = self.uncertainty.position_covariances(nodes, wanted=wanted)
         centres = self.submaps.centres
-        centres[:count] = self.uncertainty.positions(nodes)
+        where = self.uncertainty.positions(nodes)
+        known = np.isfinite(where).all(axis=1)  # outside the graph's window: the odometry's centre, never searched
+        centres[:count][known] = where[known]
         return covariances, centres, extents
 
     def accepts(self, rmse: float, constraint: float) -> bool:

@@ -87,7 +87,9 @@ def reach_of_submaps(
     relative to the scan, m²), the gate's radius along the way to each
     eligible centre; the place's extent is the fixed radius plus ``extents``
     ((n_eligible,) m, how far the submap's scans lie from its centre; 0 when
-    not given). The newest submaps, never searched, keep the fixed radius."""
+    not given). The newest submaps, never searched, keep the fixed radius; a
+    NaN covariance (a place beyond the graph's window) gets radius 0: it is
+    not searched."""
     if covariances is None:
         return search_radius(centres, position, settings)
     covariances = np.asarray(covariances, dtype=float).reshape(-1, 3, 3)
@@ -98,14 +100,21 @@ def reach_of_submaps(
     _, radius[:n_eligible] = mahalanobis_gate(
         centres[:n_eligible], position, covariances, radius[:n_eligible] + extents, settings.search_sigmas
     )
+    radius[:n_eligible][np.isnan(covariances).any(axis=(1, 2))] = 0.0  # beyond the graph's window: not searched
     return radius
 
 
-def closed_places(loops, node: int, window: int, n_scans_per_submap: int) -> set[int]:
+def closed_places(loops, node: int, window: int, n_scans_per_submap: int, centres=None, radius=0.0) -> set[int]:
     """The submaps around the old end of every loop edge (``loops``, in the
     order found) closed at most ``window`` accepted scans before ``node``,
     reaching as far along the old track as the drone has flown since: a query
-    whose nearest candidate lies there would close the same place again."""
+    whose nearest candidate lies there would close the same place again.
+
+    Given the submaps' ``centres`` ((S, 3), m), a place is ground, not one
+    pass over it: every submap whose centre lies within ``radius`` (m; one
+    number, or one per submap: its reach) of one of those is closed too (on a
+    flight over the same ground many times, the nearest candidate is often
+    another pass's submap over the place just closed)."""
     reach = -(-window // n_scans_per_submap) + 1  # submaps flown since, rounded up, and one for the place itself
     closed = set()
     for loop in reversed(loops):
@@ -113,6 +122,12 @@ def closed_places(loops, node: int, window: int, n_scans_per_submap: int) -> set
             break
         centre = loop.i // n_scans_per_submap
         closed.update(range(centre - reach, centre + reach + 1))
+    if centres is not None and closed:
+        centres = np.asarray(centres, dtype=float).reshape(-1, 3)
+        ids = sorted(k for k in closed if 0 <= k < len(centres))
+        if ids:
+            gap = np.linalg.norm(centres[:, None, :] - centres[None, ids, :], axis=2).min(axis=1)
+            closed.update(np.flatnonzero(gap < radius).tolist())
     return closed
 
 

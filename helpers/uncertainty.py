@@ -31,6 +31,17 @@ keep the answer carried over from the last computation, which edges added
 since can only have narrowed (a gate that refuses a node under the carried
 answer refuses it under the exact one).
 
+On a long flight the graph grows without end, and so would the cost of
+eliminating it. Each computation therefore takes a window: the
+:data:`WINDOW_NODES` nodes nearest the anchor along the graph's edges (a
+breadth-first search over odometry steps, edges back and loop edges), with
+the edges among them. A graph with fewer edges is less sure, so a window's
+covariances err on the wide side, as a carried answer does. A node outside
+the window has no answer (NaN): the loop search leaves its place out. When
+no node of the window could be in reach (a first revisit, which only the
+long way round the graph joins to the scan), the whole graph is computed
+once for that anchor, as on a short flight.
+
 The graph is linearised at the odometry poses (they never change during a
 run). Loop edges enter it as plain Gaussians: a false loop would move the old
 places near it and narrow the gate around the wrong spot.
@@ -39,6 +50,7 @@ places near it and narrow the gate around the wrong spot.
 from __future__ import annotations
 
 import time
+from collections import deque
 
 import gtsam
 import numpy as np
@@ -48,6 +60,7 @@ from .errors import SlamError
 from .factors import Edge, edge_information, gaussian, pose3
 
 REFRESH_NODES = 12  # recompute the marginals once the chain since the last computation holds this many nodes
+WINDOW_NODES = 800  # the nodes a computation holds at most: the anchor's neighbourhood along the graph's edges
 ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any edge, still well conditioned
 
 
@@ -74,17 +87,23 @@ class RelativeUncertainty:
         cov = graph.position_covariances(old_nodes)  # (K, 3, 3), map frame, m²
         where = graph.positions(old_nodes)  # (K, 3), map frame, beside the current node's odometry position
 
-    ``seconds``, ``refreshes`` and ``answers`` say what the answers cost.
+    ``seconds``, ``refreshes`` and ``answers`` say what the answers cost;
+    ``whole`` counts the computations that needed the whole graph.
     """
 
-    def __init__(self, settings: PoseGraphConfig, refresh_nodes: int = REFRESH_NODES) -> None:
-        self.settings, self.refresh_nodes = settings, refresh_nodes
-        self.graph = gtsam.NonlinearFactorGraph()
-        self.values = gtsam.Values()
+    def __init__(
+        self, settings: PoseGraphConfig, refresh_nodes: int = REFRESH_NODES, window_nodes: int = WINDOW_NODES
+    ) -> None:
+        self.settings, self.refresh_nodes, self.window_nodes = settings, refresh_nodes, window_nodes
         self.poses: list[np.ndarray] = []
-        self.seconds, self.refreshes, self.answers = 0.0, 0, 0  # time spent, eliminations, queries answered
+        self.seconds, self.refreshes, self.answers, self.whole = 0.0, 0, 0, 0
+        self._factors: list[gtsam.BetweenFactorPose3] = []
+        self._ends: list[tuple[int, int]] = []  # the two nodes each factor joins
+        self._pose3: list[gtsam.Pose3] = []
+        self._touching: list[list[int]] = []  # node -> the factors that join it to another node
         self._anchor: int | None = None  # the node the cached marginals are relative to
-        self._tree = None  # the graph held at the anchor, eliminated: its marginals and its solution
+        self._tree = None  # the window held at the anchor, eliminated: its marginals and its solution
+        self._window = np.zeros(0, dtype=bool)  # node -> whether the anchor's window holds it
         self._positions = np.zeros((0, 3))  # where the graph held at the anchor puts each node (map frame)
         self._cached: dict[int, np.ndarray] = {}  # node -> its 6 x 6 covariance relative to the anchor
         self._exact: set[int] = set()  # the nodes whose cached covariance came from the anchor's marginals
@@ -101,7 +120,8 @@ class RelativeUncertainty:
         pose = np.asarray(pose, dtype=float)
         node = self.num_nodes
         self.poses.append(pose)
-        self.values.insert(node, pose3(pose))
+        self._pose3.append(pose3(pose))
+        self._touching.append([])
         if node == 0:
             return node
         relative = np.linalg.inv(self.poses[-2]) @ pose
@@ -126,14 +146,18 @@ class RelativeUncertainty:
     def position_covariances(self, nodes, wanted=None) -> np.ndarray:
         """(K, 3, 3) covariance (m², map frame) of where each of ``nodes`` lies
         relative to the current (newest) node: how far the odometry's offset
-        between them may be off.
+        between them may be off. NaN for a node outside the window (see the
+        module's docstring).
 
         ``wanted``: (K, 3, 3) covariances -> (K,) bool, the nodes whose answer
-        matters (the gate's candidates). Given it, a node left out keeps the
-        answer carried over from an earlier computation, wider than or equal
-        to the exact one (edges added since only shrink it), so a gate that
-        refuses it under that answer refuses it under the exact one too; only
-        the wanted nodes are computed anew (each costs a marginal)."""
+        matters (the gate's candidates; a NaN answer is never wanted). Given
+        it, a node left out keeps the answer carried over from an earlier
+        computation, wider than or equal to the exact one (edges added since
+        only shrink it), so a gate that refuses it under that answer refuses
+        it under the exact one too; only the wanted nodes are computed anew
+        (each costs a marginal). If the window wants none of them while some
+        lie outside it, the whole graph is computed. Without ``wanted``, every
+        node is answered from the whole graph."""
         start = time.perf_counter()
         nodes = np.asarray(nodes, dtype=int).ravel()
         current = self.num_nodes - 1
@@ -141,26 +165,38 @@ class RelativeUncertainty:
             raise SlamError(f"nodes {nodes.min()} .. {nodes.max()} are not all in the graph ({self.num_nodes} nodes)")
         stale = self._due or self._anchor is None or current - self._anchor >= self.refresh_nodes
         if stale or (nodes.size and nodes.max() > self._anchor):
-            self._refresh(current)
-        covariance = self._from_cache(nodes)
+            self._refresh(current, whole=wanted is None)
+        covariance = self._answers(nodes, wanted)
+        outside = ~self._window[nodes]
+        if outside.any() and (wanted is None or not wanted(covariance).any()):
+            self._refresh(current, whole=True)
+            covariance = self._answers(nodes, wanted)
+        self.seconds += time.perf_counter() - start
+        self.answers += 1
+        return covariance
+
+    def _answers(self, nodes: np.ndarray, wanted) -> np.ndarray:
+        """Carried or exact answers for the window's ``nodes`` (exact for the wanted ones), NaN outside it."""
+        inside = self._window[nodes]
+        covariance = np.full((len(nodes), 3, 3), np.nan)
+        covariance[inside] = self._from_cache(nodes[inside])
         if wanted is not None:
-            redo = [k for k in np.flatnonzero(wanted(covariance)) if nodes[k] not in self._exact]
+            redo = [k for k in np.flatnonzero(wanted(covariance) & inside) if nodes[k] not in self._exact]
         else:
-            redo = [k for k, c in enumerate(nodes) if c not in self._exact]
+            redo = [k for k in np.flatnonzero(inside) if nodes[k] not in self._exact]
         for k in redo:
             self._cached[int(nodes[k])] = self._tree.marginalCovariance(int(nodes[k]))
             self._exact.add(int(nodes[k]))
         if redo:
             covariance[redo] = self._from_cache(nodes[redo])
-        self.seconds += time.perf_counter() - start
-        self.answers += 1
         return covariance
 
     def positions(self, nodes) -> np.ndarray:
         """(K, 3) where the graph puts each of ``nodes`` (map frame), held at
         the anchor's odometry pose and so comparable with the current node's
         odometry position: the odometry's positions moved by the loop edges
-        (call after :meth:`position_covariances`, which computes them)."""
+        (call after :meth:`position_covariances`, which computes them; NaN
+        outside the window)."""
         return self._positions[np.asarray(nodes, dtype=int).ravel()]
 
     def _from_cache(self, nodes: np.ndarray) -> np.ndarray:
@@ -183,27 +219,57 @@ class RelativeUncertainty:
 
     def _add(self, edge: Edge, *, loop: bool) -> np.ndarray:
         information = edge_information(edge, self.settings, loop=loop)
-        self.graph.add(gtsam.BetweenFactorPose3(edge.i, edge.j, pose3(edge.relative), gaussian(information)))
+        for k in (edge.i, edge.j):
+            self._touching[k].append(len(self._factors))
+        self._factors.append(gtsam.BetweenFactorPose3(edge.i, edge.j, pose3(edge.relative), gaussian(information)))
+        self._ends.append((min(edge.i, edge.j), max(edge.i, edge.j)))
         return information
 
-    def _refresh(self, anchor: int) -> None:
-        """The marginals of the graph held at node ``anchor``; every cached
-        answer is carried over to it (relative to the new anchor, through the
-        chain since the old one) until a query wants it anew."""
-        graph = gtsam.NonlinearFactorGraph(self.graph)
+    def _window_of(self, anchor: int, whole: bool) -> np.ndarray:
+        """The nodes nearest ``anchor`` along the edges, at most ``window_nodes`` of them (all if ``whole``), sorted."""
+        if whole or self.num_nodes <= self.window_nodes:
+            return np.arange(self.num_nodes)
+        seen, queue = {anchor}, deque([anchor])
+        while queue and len(seen) < self.window_nodes:
+            node = queue.popleft()
+            for f in self._touching[node]:
+                for other in self._ends[f]:
+                    if other not in seen and len(seen) < self.window_nodes:
+                        seen.add(other)
+                        queue.append(other)
+        return np.array(sorted(seen))
+
+    def _refresh(self, anchor: int, whole: bool = False) -> None:
+        """The marginals of the window around node ``anchor`` (the whole graph
+        if ``whole``), held at it; every cached answer is carried over to it
+        (relative to the new anchor, through the chain since the old one)
+        until a query wants it anew."""
+        window = self._window_of(anchor, whole)
+        inside = np.zeros(self.num_nodes, dtype=bool)
+        inside[window] = True
+        graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        for node in window:
+            values.insert(int(node), self._pose3[node])
+            for f in self._touching[node]:
+                i, j = self._ends[f]
+                if j == node and inside[i]:  # each edge once, at its later end
+                    graph.add(self._factors[f])
         noise = gtsam.noiseModel.Isotropic.Sigma(6, ANCHOR_SIGMA)
-        graph.add(gtsam.PriorFactorPose3(anchor, self.values.atPose3(anchor), noise))
+        graph.add(gtsam.PriorFactorPose3(anchor, values.atPose3(anchor), noise))
         try:
-            self._tree = graph.linearize(self.values).eliminateMultifrontal()
-            moved = self.values.retract(self._tree.optimize())
+            self._tree = graph.linearize(values).eliminateMultifrontal()
+            moved = values.retract(self._tree.optimize())
         except RuntimeError as exc:  # an indeterminant system: some node joined by no edge
             raise SlamError(f"the loop search's graph cannot be solved: {exc}") from None
-        self._positions = gtsam.utilities.extractPose3(moved)[:, 9:12]  # rows [R (9), t (3)], node by node
-        kept = np.array([c for c in self._cached if c < anchor], dtype=int)
+        self._positions = np.full((self.num_nodes, 3), np.nan)
+        self._positions[window] = gtsam.utilities.extractPose3(moved)[:, 9:12]  # rows [R (9), t (3)], sorted keys
+        kept = np.array([c for c in self._cached if c < anchor], dtype=int)  # outside the window too: still valid
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
         self._anchor, self._exact, self._chain, self._due = anchor, set(), np.zeros((6, 6)), False
+        self._window = inside
         self.refreshes += 1
+        self.whole += whole and self.num_nodes > self.window_nodes
 
 
 def _rotation_first(information: np.ndarray) -> np.ndarray:
@@ -223,14 +289,16 @@ def mahalanobis_gate(
     ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
     the direction ``u`` of the offset follows: ``radius + sigmas /
     sqrt(u^T C^-1 u)``, so that the gate is ``|d| < that radius``; with
-    ``C = 0`` it is ``radius``. Returns (in reach (K,) bool, radius (K,) m).
+    ``C = 0`` it is ``radius``. A NaN covariance (no answer) is never in
+    reach, its radius NaN. Returns (in reach (K,) bool, radius (K,) m).
     """
     offset = np.asarray(centres, float).reshape(-1, 3) - np.asarray(position, float)
     distance = np.linalg.norm(offset, axis=1)
     direction = offset / np.maximum(distance, 1e-12)[:, None]
     covariances = np.asarray(covariances, float).reshape(-1, 3, 3)
+    known = np.isfinite(covariances).all(axis=(1, 2))
     floor = 1e-12 * np.eye(3)  # a node at the anchor has no uncertainty at all
-    inverse = np.linalg.inv(covariances + floor)
+    inverse = np.linalg.inv(np.where(known[:, None, None], covariances, np.eye(3)) + floor)
     spread = 1.0 / np.sqrt(np.einsum("ki,kij,kj->k", direction, inverse, direction))
-    reach = np.asarray(radius, float) + sigmas * spread
-    return distance < reach, reach
+    reach = np.where(known, np.asarray(radius, float) + sigmas * spread, np.nan)
+    return known & (distance < np.nan_to_num(reach, nan=-1.0)), reach

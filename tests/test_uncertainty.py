@@ -248,3 +248,93 @@ def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
     assert m["ate_rmse_optimized_m"] < 0.5 * m["ate_rmse_odometry_m"]
     for loop in grade_loops(short_loop, result):
         assert loop.error_m < 1.0 and loop.error_deg < 2.0
+
+
+def laps_graph(settings, n_laps=3, per_lap=60, window_nodes=None):
+    """A 60-node circle flown ``n_laps`` times, edges back over 2 nodes and a loop edge every 4th node of
+    every lap after the first to the same place one lap before; the graph holding it and the poses."""
+
+    def pose(k):
+        a = 2 * np.pi * k / per_lap
+        T = step(0.0, yaw_deg=np.degrees(a))
+        T[:3, 3] = [60.0 * np.cos(a), 60.0 * np.sin(a), 0.0]
+        return T
+
+    graph = RelativeUncertainty(settings, window_nodes=window_nodes or n_laps * per_lap)
+    poses = [pose(k) for k in range(n_laps * per_lap)]
+    for k, T in enumerate(poses):
+        graph.add_node(T)
+        if k >= 2:
+            graph.add_edge(Edge(k - 2, k, np.linalg.inv(poses[k - 2]) @ T))
+        if k >= per_lap and k % 4 == 0:
+            graph.add_edge(Edge(k - per_lap, k, np.linalg.inv(poses[k - per_lap]) @ T), loop=True)
+    return graph, np.array(poses)
+
+
+def test_a_window_of_the_graph_answers_on_the_wide_side_and_nothing_outside_it():
+    # Three laps (180 nodes), a window of 70: the nodes near the current one along the edges (the last lap's end
+    # and the places it closed loops with) are answered, never narrower than the whole graph; the rest is NaN.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    whole, _ = laps_graph(settings)
+    windowed, poses = laps_graph(settings, window_nodes=70)
+    nodes = np.arange(0, 170, 3)
+    exact = whole.position_covariances(nodes)
+    answer = windowed.position_covariances(nodes, wanted=lambda c: np.isfinite(c).all(axis=(1, 2)))
+    inside = np.isfinite(answer).all(axis=(1, 2))
+    assert 15 <= inside.sum() <= 24 and windowed.whole == 0  # at most 70 nodes, and every third of them asked
+    near = lambda lo, hi: (nodes >= lo) & (nodes <= hi)  # noqa: E731
+    # this lap's end and the same place in each lap before (joined to it by loop edges) are in; the far side is not
+    assert inside[near(162, 179) | near(105, 127) | near(47, 65)].all() and not inside[near(10, 40)].any()
+    for wide, right in zip(answer[inside], exact[inside], strict=True):
+        assert np.linalg.eigvalsh(wide - right).min() > -1e-9 * np.trace(right)
+    assert np.isnan(windowed.positions(nodes[~inside])).all()
+    np.testing.assert_allclose(windowed.positions([179]), poses[[179], :3, 3], atol=1e-6)  # the anchor stays put
+
+
+def test_a_place_only_the_whole_graph_reaches_is_answered_from_it():
+    # If no node of the window could be in reach (a first revisit: only the long way round joins it), the query
+    # computes the whole graph for its anchor, and answers as a graph that never had a window.
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    whole, _ = laps_graph(settings)
+    windowed, _ = laps_graph(settings, window_nodes=70)
+    nodes = np.arange(0, 40, 3)  # the first lap's start: beyond the window
+    answer = windowed.position_covariances(nodes, wanted=lambda c: np.isfinite(c).all(axis=(1, 2)) & False)
+    assert windowed.whole == 1 and np.isfinite(answer).all()
+    exact, far = whole.position_covariances(nodes), nodes > 4  # nodes 0 and 3 were answered by the window first
+    np.testing.assert_allclose(answer[far], exact[far], rtol=1e-6, atol=1e-12)
+    for wide, right in zip(answer[~far], exact[~far], strict=True):
+        assert np.linalg.eigvalsh(wide - right).min() > -1e-9 * np.trace(right)
+    np.testing.assert_allclose(windowed.positions(nodes), whole.positions(nodes), atol=1e-6)
+
+
+def test_a_closed_place_is_the_ground_not_one_pass_over_it():
+    # Pass A flies submaps 0-9 out along x (centres every 10 m), pass B submaps 10-19 back 1 m beside it. A loop
+    # just closed on submap 3 closes submaps 1-5 of pass A (the old track flown since) and, given the centres,
+    # pass B's submaps over the same ground (within the 7.9 m radius of one of them), and no others.
+    from helpers.loopsearch import closed_places
+
+    centres = np.zeros((20, 3))
+    centres[:10, 0] = 10.0 * np.arange(10)
+    centres[10:, 0] = 91.0 - 10.0 * np.arange(10)
+    loops = [Edge(17, 120, np.eye(4))]  # scan 17 lies in submap 3 (5 scans a submap)
+    assert closed_places(loops, 122, 3, 5) == {1, 2, 3, 4, 5}
+    assert closed_places(loops, 122, 3, 5, centres=centres, radius=7.9) == {1, 2, 3, 4, 5, 14, 15, 16, 17, 18}
+    assert closed_places(loops, 124, 3, 5, centres=centres, radius=7.9) == set()  # the window has passed
+
+
+def test_a_loop_search_on_a_window_of_the_graph_closes_the_same_loops():
+    # The hairpin's way back with a window of 20 nodes: the first revisit is joined to the scan only the long way
+    # round (beyond the window), so it is searched on the whole graph; the loops found are the whole graph's.
+    from helpers.config import Config
+    from helpers.loopclosure import LoopCloser
+
+    def run(window_nodes):
+        settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "skip_after_loop": 0})
+        closer = LoopCloser(settings.loop_closure, settings.map, AlwaysMatches(), settings.pose_graph)
+        closer.uncertainty.window_nodes = window_nodes
+        return hairpin(closer), closer.uncertainty
+
+    (every, _), whole = run(1000)
+    (windowed, _), graph = run(20)
+    assert whole.whole == 0 and graph.whole >= 1 and len(every) > 20
+    assert windowed == every
