@@ -114,6 +114,22 @@ class RelativeUncertainty:
     def num_nodes(self) -> int:
         return len(self.poses)
 
+    @property
+    def graph(self) -> gtsam.NonlinearFactorGraph:
+        """Every edge so far (odometry steps, edges back, loop edges) as GTSAM factors: the whole graph."""
+        graph = gtsam.NonlinearFactorGraph()
+        for factor in self._factors:
+            graph.add(factor)
+        return graph
+
+    @property
+    def values(self) -> gtsam.Values:
+        """Every node at its odometry pose."""
+        values = gtsam.Values()
+        for node, pose in enumerate(self._pose3):
+            values.insert(node, pose)
+        return values
+
     def add_node(self, pose: np.ndarray, step: Edge | None = None) -> int:
         """Node ``num_nodes`` at its odometry pose, joined to the previous one by
         ``step`` (its edge, for its information) or by the odometry step between the poses."""

@@ -338,3 +338,18 @@ def test_a_loop_search_on_a_window_of_the_graph_closes_the_same_loops():
     (windowed, _), graph = run(20)
     assert whole.whole == 0 and graph.whole >= 1 and len(every) > 20
     assert windowed == every
+
+
+def test_the_whole_graph_it_hands_out_gives_gtsams_own_marginals():
+    # Notebook 5 computes the gate's covariance by hand from `graph` and `values`: GTSAM's Marginals of the
+    # whole graph held at the current node must be the answer, even once the queries use a window.
+    import gtsam
+
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    windowed, poses = laps_graph(settings, window_nodes=70)
+    held = windowed.graph
+    assert held.size() == 179 + 178 + 30  # odometry steps, edges back over 2 nodes, loop edges
+    held.add(gtsam.PriorFactorPose3(179, windowed.values.atPose3(179), gtsam.noiseModel.Isotropic.Sigma(6, 1e-6)))
+    sigma = gtsam.Marginals(held, windowed.values).marginalCovariance(30)
+    R = poses[30][:3, :3]
+    np.testing.assert_allclose(windowed.position_covariances([30])[0], R @ sigma[3:, 3:] @ R.T, rtol=1e-5)
