@@ -313,3 +313,18 @@ def test_the_configuration_refuses_an_unknown_robust_fit():
     with pytest.raises(SlamError, match="robust_fit must be one of msac, msac4"):
         config_from_dict({"registration": {"robust_fit": "MSAC4"}})
     assert config_from_dict({"registration": {"robust_fit": "msac4"}}).registration.robust_fit == "msac4"
+
+
+@pytest.mark.parametrize("metric", ["point-to-plane", "plane-to-plane"])
+def test_small_gicp_gives_the_same_bits_every_time(flight, metric, monkeypatch):
+    # On one machine the same pair must register to the same bits, its information too, even with the clouds
+    # prepared on two threads: a long flight's chain of steps would carry any difference in the last bit on.
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    moving, fixed = flight.scans[13], flight.scans[10]
+    init = np.linalg.inv(flight.poses[10]) @ flight.poses[13] @ _transform(0.3, [0.5, -0.4, 0.1])
+    runs = []
+    for _ in range(12):
+        ready = icp_cloud(moving, metric, "small_gicp"), icp_cloud(fixed, metric, "small_gicp")
+        result = refine_icp(*ready, init, **keywords(metric, "small_gicp", tolerance=1e-9))
+        runs.append(np.concatenate([result.T_fixed_moving.ravel(), result.information.ravel(), [result.rmse]]))
+    assert all(np.array_equal(run, runs[0]) for run in runs)
