@@ -219,10 +219,11 @@ class LoopCloser:
     def _uncertain_centres(self, position: np.ndarray, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """For the gate, from the scan at ``position``: each eligible submap's
         centre covariance (exact where the gate may let it in, carried over
-        elsewhere, NaN outside the graph's window); every submap's centre, the eligible ones where the graph
-        puts them (the odometry's, moved by the loop edges found); and each
-        eligible submap's extent beyond the fixed radius, how far its scans lie
-        from its centre (a scan over any of them overlaps it)."""
+        elsewhere, NaN outside the graph's window); every submap's centre, the
+        eligible ones where the graph puts them (the odometry's, moved by the
+        loop edges found); and each eligible submap's extent beyond the fixed
+        radius, how far its scans lie from its centre (a scan over any of them
+        overlaps it)."""
         settings, n = self.settings, self.submaps.n_scans_per_submap
         count = eligible_submaps(len(self.submaps), settings)
         nodes = [centre_scan_id(k, n) for k in range(count)]
