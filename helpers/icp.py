@@ -61,7 +61,8 @@ ALIGN_THREADS = 1  # small_gicp's align on several threads sums in an order that
 
 
 def threads() -> int:
-    """Threads for small_gicp: ``$OMP_NUM_THREADS`` when set (as Open3D and numpy obey it), else every core."""
+    """Threads for small_gicp's k-d trees, covariances and neighbour searches (its alignment takes
+    :data:`ALIGN_THREADS`): ``$OMP_NUM_THREADS`` when set (as Open3D and numpy obey it), else every core."""
     value = os.environ.get("OMP_NUM_THREADS", "")
     return int(value) if value.isdigit() and int(value) > 0 else os.cpu_count() or 1
 

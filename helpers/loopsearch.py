@@ -97,10 +97,10 @@ def reach_of_submaps(
     if len(covariances) != n_eligible or len(extents) != n_eligible:
         raise SlamError(f"{len(covariances)} covariances and {len(extents)} extents for {n_eligible} eligible submaps")
     radius = np.full(len(centres), settings.loop_closure_search_radius)
-    _, radius[:n_eligible] = mahalanobis_gate(
+    _, reach = mahalanobis_gate(
         centres[:n_eligible], position, covariances, radius[:n_eligible] + extents, settings.search_sigmas
     )
-    radius[:n_eligible][np.isnan(covariances).any(axis=(1, 2))] = 0.0  # beyond the graph's window: not searched
+    radius[:n_eligible] = np.nan_to_num(reach, nan=0.0)  # no answer (beyond the graph's window): not searched
     return radius
 
 
