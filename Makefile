@@ -16,6 +16,12 @@ SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 # sleep; it must be set before Open3D loads, so here rather than in the package (13 % faster registration).
 export OMP_WAIT_POLICY ?= PASSIVE
 
+# The suite runs in TEST_WORKERS processes (pytest-xdist), each test file whole in one of them: a notebook's
+# cells share one kernel, a module's fixtures are built once. Most tests hold one core, so two workers on two
+# cores take make test from 12 to about 8 minutes. TEST_WORKERS=0 runs it in this process.
+TEST_WORKERS ?= 2
+PYTEST := $(VENV)/bin/pytest -n $(TEST_WORKERS) --dist loadfile
+
 run: $(STAMP)
 	$(PY) -m helpers dataset --out build/dataset
 	$(PY) -m helpers run --out build/run
@@ -24,7 +30,7 @@ run: $(STAMP)
 test: $(STAMP) browser
 	$(VENV)/bin/ruff check helpers tests benchmarks
 	$(VENV)/bin/ruff format --check helpers tests benchmarks
-	$(VENV)/bin/pytest
+	$(PYTEST)
 
 # The tests hold on any machine and still bite: the whole suite again on
 # other lidar noise and one thread, then one-line mutants of the pipeline
@@ -32,7 +38,7 @@ test: $(STAMP) browser
 # The book's browser tests read the committed notebooks, not the noise: make
 # test runs them once.
 robustness: $(STAMP)
-	HELPERS_NOISE_SEED=1 OMP_NUM_THREADS=1 $(VENV)/bin/pytest --ignore=tests/test_site.py --ignore=tests/test_interactive_views.py
+	HELPERS_NOISE_SEED=1 OMP_NUM_THREADS=1 $(PYTEST) --ignore=tests/test_site.py --ignore=tests/test_interactive_views.py
 	$(PY) tests/mutants.py
 
 setup: $(STAMP)
