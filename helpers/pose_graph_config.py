@@ -56,7 +56,7 @@ class PoseGraphConfig(BoundedTable):
         4, "each scan is also registered to the scans up to this many nodes back (1: the reference)"
     )
     edges_back_icp_max_iterations: int = param(
-        15, "most ICP iterations of an edge back (its guess, the chained odometry, is close already)"
+        6, "most ICP iterations of an edge back (its guess, the chained odometry, is close already)"
     )
     edges_back_rmse_threshold: float = param(
         0.6, "surface RMSE (m) below which an edge back is kept (as a loop edge's rmse_threshold)"
