@@ -41,11 +41,14 @@ WEAK_CONSTRAINT = 0.005
 class IcpResult:
     """A refined registration. It unpacks as ``T_fixed_moving, rmse`` (what :func:`refine_icp` always
     returned); ``information`` (6 x 6, translation first, uncalibrated: :mod:`helpers.information`) says how
-    sure it is, None for point-to-point ICP, whose cost pins no plane and gives no meaningful one."""
+    sure it is, None for point-to-point ICP, whose cost pins no plane and gives no meaningful one.
+    ``nearest``: the pass that measured ``rmse``, ``(squared distance, index)`` of the nearest fixed point
+    of every moving point at ``T_fixed_moving`` (small_gicp only), for a score that needs the same pairs."""
 
     T_fixed_moving: np.ndarray
     rmse: float
     information: np.ndarray | None = None
+    nearest: tuple[np.ndarray, np.ndarray] | None = None
 
     def __iter__(self):
         return iter((self.T_fixed_moving, self.rmse))
@@ -268,7 +271,7 @@ def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance
         )
     elif metric != "point-to-point":
         information = hessian_information(result.H, result.error, result.num_inliers)
-    return IcpResult(transform, rmse, information)
+    return IcpResult(transform, rmse, information, (squared, index))
 
 
 def _ready(cloud, what: str, metric: str, backend: str) -> IcpCloud:

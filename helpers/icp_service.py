@@ -131,7 +131,7 @@ class IcpService:
             backend=self.backend,
             information=self.information,
         )
-        return _icp.IcpResult(fit.T_fixed_moving, fit.rmse, self.calibrated(fit.information))
+        return _icp.IcpResult(fit.T_fixed_moving, fit.rmse, self.calibrated(fit.information), fit.nearest)
 
     def calibrated(self, information):
         """A raw information (:mod:`helpers.information`) scaled and capped as this service's are (None stays None)."""
@@ -147,7 +147,10 @@ class IcpService:
             source, target = moving, fixed
         fit = self.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
         T = fit.T_fixed_moving
-        return _icp.IcpResult(T, surface_rmse(moving, self.ready(fixed), T, self.inlier_distance), fit.information)
+        # the alignment's last pass paired these points with this cloud at T: the score reuses it
+        nearest = fit.nearest if target is self.ready(fixed) else None
+        surface = surface_rmse(moving, self.ready(fixed), T, self.inlier_distance, nearest=nearest)
+        return _icp.IcpResult(T, surface, fit.information)
 
     def constraint(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray) -> float:
         """How well the pairs of a registration pin its translation (:func:`helpers.icp.pairing`)."""
@@ -172,7 +175,9 @@ def surface_normals(points: np.ndarray) -> np.ndarray:
     return np.asarray(to_cloud(points, normals_knn=SURFACE_NEIGHBORS).normals)
 
 
-def surface_rmse(moving: np.ndarray, fixed, T_fixed_moving: np.ndarray, inlier_distance: float, normals=None):
+def surface_rmse(
+    moving: np.ndarray, fixed, T_fixed_moving: np.ndarray, inlier_distance: float, normals=None, nearest=None
+):
     """RMS distance (m) from the moved points to the fixed cloud's *surface*:
     each moved point is paired with its nearest fixed point (pairs farther
     than ``inlier_distance`` are ignored) and measured along that point's
@@ -186,11 +191,12 @@ def surface_rmse(moving: np.ndarray, fixed, T_fixed_moving: np.ndarray, inlier_d
     the error grows with the misalignment (tests/test_loopclosure.py checks it
     on the default flight). ``normals`` of ``fixed`` may be given when they
     are already known; a ``fixed`` made ready for ICP
-    (:class:`helpers.icp.IcpCloud` with normals) brings its own normals and k-d tree.
+    (:class:`helpers.icp.IcpCloud` with normals) brings its own normals and k-d tree, and ``nearest``
+    (:attr:`helpers.icp.IcpResult.nearest`) the pass over that tree an alignment made at ``T_fixed_moving``.
     """
     moved = transform_points(moving, T_fixed_moving)
     if isinstance(fixed, _icp.IcpCloud):
-        squared, nearest = fixed.nearest(moved)
+        squared, nearest = fixed.nearest(moved) if nearest is None else nearest
         fixed, normals = fixed.points, fixed.normals
     else:
         from scipy.spatial import cKDTree

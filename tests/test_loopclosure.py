@@ -249,6 +249,28 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
     assert point[1] < point[0]  # the reference's measure is fooled here
 
 
+def test_the_service_scores_with_the_alignments_own_pairs(default_dataset, monkeypatch):
+    """A registration through the service is scored on the pairs its alignment's last pass found: the same
+    surface RMSE, to the bit, as scoring it anew, and one nearest-neighbour pass fewer."""
+    import helpers.icp
+    from helpers.features import grid_average
+    from helpers.icp_service import surface_rmse
+
+    moving, fixed = grid_average(default_dataset.scans[3], 0.75), grid_average(default_dataset.scans[0], 0.75)
+    truth = np.linalg.inv(default_dataset.poses[0]) @ default_dataset.poses[3]
+    guess = truth.copy()
+    guess[:3, 3] += [0.4, -0.3, 0.1]
+    service = icp_with("plane-to-plane", 3.0, 6, 1e-3, "small_gicp")
+    passes = []
+    real = helpers.icp.IcpCloud.nearest
+    monkeypatch.setattr(helpers.icp.IcpCloud, "nearest", lambda self, points: passes.append(1) or real(self, points))
+    T, score = service(moving=moving, fixed=fixed, T_fixed_moving=guess)
+    assert len(passes) == 1  # the alignment's RMSE pass; the score reads it
+    assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.2  # from 0.51 m off
+    assert score == surface_rmse(moving, service.ready(fixed), T, 3.0)  # anew: a second pass
+    assert len(passes) == 2
+
+
 def test_icp_fn_keeps_only_the_recently_used_clouds_ready(monkeypatch):
     """Clouds are made ready once while recent, and at most PREPARED_CLOUDS are kept (memory on long flights)."""
     import helpers.icp
