@@ -113,7 +113,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     guess, or fewer than ``tracking_min_overlap`` of the points paired."""
     fit = config.registration
     start = time.perf_counter()
-    refined = _icp(moving, fixed, motion, fit, icp)
+    refined = _icp(moving, fixed, motion, fit, icp, close=True)
     T_fine, rmse = refined
     jump = np.linalg.inv(motion) @ T_fine
     jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
@@ -280,21 +280,33 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
     return result
 
 
-def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None):
+def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None, close=False):
     """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``,
-    an :class:`helpers.icp.IcpResult` with its information."""
+    an :class:`helpers.icp.IcpResult` with its information.
+
+    With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a
+    first ICP on the whole scan put it, and registered again; a start known to be ``close`` (tracking's
+    constant-velocity guess, within a few decimetres where tracking is kept) is cropped where it is and
+    registered once: the crop's margin is the inlier distance, metres."""
     wanted = (fit.metric, fit.icp_backend)
     source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
     target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
     icp = icp or IcpService.from_config(fit)
     cap = fit.icp_max_iterations
-    refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
-    if fit.overlap_crop:  # again on the moving points the fixed scan also saw, where ICP put them (helpers.overlap)
-        T = refined[0]
+
+    def cropped_at(T):  # the moving points the fixed scan also saw, at T (helpers.overlap)
         if isinstance(source, IcpCloud):
-            cropped = cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
-        else:
-            cropped = crop(source, fixed.icp_points, T, fit.inlier_distance)
+            return cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
+        return crop(source, fixed.icp_points, T, fit.inlier_distance)
+
+    if fit.overlap_crop and close:
+        return icp.align(
+            moving=cropped_at(T_fixed_moving), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap
+        )
+    refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
+    if fit.overlap_crop:  # again on the overlap where ICP put the scan
+        T = refined[0]
+        cropped = cropped_at(T)
         if cropped is not source:  # the result, information included, of the registration on the overlap
             refined = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
     return refined

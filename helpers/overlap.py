@@ -18,9 +18,11 @@ point it does not belong to). The outline is the fixed scan's whatever the
 scans' headings, so a turn, a hover or a yaw of 90 degrees between the two
 crops along whichever edges they share, not along one direction of flight.
 
-The odometry crops at the answer of a first ICP on the whole scan and
-refines once more (:mod:`helpers.frames`), so a start far off cannot cut the
-overlap away. The edges back register whole scans: cropped, they left the
+The global workflow crops at the answer of a first ICP on the whole scan
+and refines once more (:mod:`helpers.frames`), so a robust fit a metre or
+more off cannot cut the overlap away; tracking starts from the last motion,
+a few decimetres off at most where it is kept, and crops there, registering
+once. The edges back register whole scans: cropped, they left the
 default flight's map worse and their step lengths no truer (the ray rows pull
 those longer steps more than the leading edge does; ``benchmarks/bench_bias.py``).
 """

@@ -96,6 +96,33 @@ def test_icp_with_the_crop_recovers_a_turned_step(yaw_deg):
     np.testing.assert_allclose(pair.T_fine[:3, :3], T_true[:3, :3], atol=2e-3)
 
 
+def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
+    """Tracking's start is close: ICP crops the moving strip at it and registers once, where a start from the
+    robust fit is registered whole, cropped where that put it, and registered again. Both end on the truth."""
+    from helpers.frames import _icp
+    from helpers.icp_service import IcpService
+
+    surface = rectangle(120.0, 120.0, 0.4)
+    config = Config().with_values(registration={"icp_grid_step": 0.5, "inlier_distance": 2.0})
+    T_true = yawed(10.0, (6.0, 2.0, 0.0))
+    fixed_points = surface[(np.abs(surface[:, 0]) <= 20) & (np.abs(surface[:, 1]) <= 10)]
+    in_moving = (surface - T_true[:3, 3]) @ T_true[:3, :3]
+    moving_points = in_moving[(np.abs(in_moving[:, 0]) <= 20) & (np.abs(in_moving[:, 1]) <= 10)]
+    moving, fixed = prepare(moving_points, config), prepare(fixed_points, config)
+    clouds = []
+    real = IcpService.align
+    monkeypatch.setattr(
+        IcpService, "align", lambda self, **kw: clouds.append(len(kw["moving"].points)) or real(self, **kw)
+    )
+    start = yawed(11.0, (6.3, 2.0, 0.0))
+    for close, registrations in ((True, 1), (False, 2)):
+        clouds.clear()
+        T, _ = _icp(moving, fixed, start, config.registration, close=close)
+        assert len(clouds) == registrations and clouds[-1] < len(moving.icp_points)  # the last one on the overlap
+        assert np.linalg.norm(T[:3, 3] - T_true[:3, 3]) < 0.05
+        np.testing.assert_allclose(T[:3, :3], T_true[:3, :3], atol=2e-3)
+
+
 def step_ratios(name: str) -> tuple[np.ndarray, np.ndarray]:
     """(along-track ratio of each odometry step to the true step, which steps registered) on a flight."""
     bench = bench_bias()
