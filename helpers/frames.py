@@ -113,7 +113,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     guess, or fewer than ``tracking_min_overlap`` of the points paired."""
     fit = config.registration
     start = time.perf_counter()
-    refined = _icp(moving, fixed, motion, fit, icp, close=True)
+    refined = _icp(moving, fixed, motion, fit, icp, crop_at=motion)
     T_fine, rmse = refined
     jump = np.linalg.inv(motion) @ T_fine
     jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
@@ -184,10 +184,10 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     @functools.cache
     def from_guess():
         """ICP from the fallback guess and its pairing, computed once however many checks below ask for it."""
-        retry = _icp(moving, fixed, guess, fit, icp)
+        retry = _icp(moving, fixed, guess, fit, icp, crop_at=guess if momentum else None)
         return retry, paired_and_constraint(retry[0])
 
-    refined = _icp(moving, fixed, T_coarse, fit, icp)
+    refined = _icp(moving, fixed, T_coarse, fit, icp, crop_at=guess if momentum else None)
     T_fine, rmse = refined
     if rmse > fit.icp_fallback_rmse and fallback is None:
         retry, _ = from_guess()
@@ -203,7 +203,7 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     # matches itself metres away): ICP from the previous motion too, and the one that pairs more is kept.
     if paired < fit.tracking_min_overlap and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
-        if paired_retry > paired:
+        if paired_retry > paired + BETTER_PAIRED:  # clearly more: two answers that pair alike are one answer
             fallback = (
                 f"ICP from the robust fit paired {paired:.0%} of the points; restarted from the previous motion, "
                 f"which paired {paired_retry:.0%}"
@@ -280,14 +280,14 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
     return result
 
 
-def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None, close=False):
+def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None, crop_at=None):
     """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``,
     an :class:`helpers.icp.IcpResult` with its information.
 
     With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a
-    first ICP on the whole scan put it, and registered again; a start known to be ``close`` (tracking's
-    constant-velocity guess, within a few decimetres where tracking is kept) is cropped where it is and
-    registered once: the crop's margin is the inlier distance, metres."""
+    first ICP on the whole scan put it, and registered again; given ``crop_at`` (4 x 4: the last motion,
+    within a few decimetres on a steady flight), it is cropped there and registered once: the crop's
+    margin is the inlier distance, metres."""
     wanted = (fit.metric, fit.icp_backend)
     source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
     target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
@@ -299,10 +299,8 @@ def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: Registrat
             return cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
         return crop(source, fixed.icp_points, T, fit.inlier_distance)
 
-    if fit.overlap_crop and close:
-        return icp.align(
-            moving=cropped_at(T_fixed_moving), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap
-        )
+    if fit.overlap_crop and crop_at is not None:
+        return icp.align(moving=cropped_at(crop_at), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
     refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
     if fit.overlap_crop:  # again on the overlap where ICP put the scan
         T = refined[0]

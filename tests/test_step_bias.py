@@ -115,9 +115,9 @@ def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
         IcpService, "align", lambda self, **kw: clouds.append(len(kw["moving"].points)) or real(self, **kw)
     )
     start = yawed(11.0, (6.3, 2.0, 0.0))
-    for close, registrations in ((True, 1), (False, 2)):
+    for crop_at, registrations in ((start, 1), (None, 2)):
         clouds.clear()
-        T, _ = _icp(moving, fixed, start, config.registration, close=close)
+        T, _ = _icp(moving, fixed, start, config.registration, crop_at=crop_at)
         assert len(clouds) == registrations and clouds[-1] < len(moving.icp_points)  # the last one on the overlap
         assert np.linalg.norm(T[:3, 3] - T_true[:3, 3]) < 0.05
         np.testing.assert_allclose(T[:3, :3], T_true[:3, :3], atol=2e-3)
