@@ -18,11 +18,15 @@ point it does not belong to). The outline is the fixed scan's whatever the
 scans' headings, so a turn, a hover or a yaw of 90 degrees between the two
 crops along whichever edges they share, not along one direction of flight.
 
-The global workflow crops at the answer of a first ICP on the whole scan
-and refines once more (:mod:`helpers.frames`), so a robust fit a metre or
-more off cannot cut the overlap away; tracking starts from the last motion,
-a few decimetres off at most where it is kept, and crops there, registering
-once. The edges back register whole scans: cropped, they left the
+The odometry crops where the last motion (a constant-velocity guess, a few
+decimetres off on a steady flight; the crop's margin is the inlier distance)
+puts the scan, and registers once (:mod:`helpers.frames`): from the robust
+fit in the global workflow, from the guess when tracking. Where there is no
+last motion (a first step, a pair registered alone) it registers the whole
+scan first and crops where that put it, then refines once more. Cropping
+after a first registration of the whole scan had left the steps of low
+flights short: the leading edge pulled that first answer back, and over flat
+ground the second registration stayed near it. The edges back register whole scans: cropped, they left the
 default flight's map worse and their step lengths no truer (the ray rows pull
 those longer steps more than the leading edge does; ``benchmarks/bench_bias.py``).
 """
