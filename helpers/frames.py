@@ -200,7 +200,7 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
     paired, constraint = paired_and_constraint(T_fine)
     # 4. A fit that pairs little of the scan can still score a low RMSE over its few pairs (flat, sparse ground
-    # matches itself metres away): ICP from the previous motion too, and the one that pairs more is kept.
+    # matches itself metres away): ICP from the previous motion too, kept if it pairs clearly more.
     if paired < fit.tracking_min_overlap and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
         if paired_retry > paired + BETTER_PAIRED:  # clearly more: two answers that pair alike are one answer
