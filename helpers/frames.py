@@ -181,13 +181,15 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             return float("nan"), float("nan")
         return pairing(moving.icp, fixed.icp, T, fit.inlier_distance)
 
+    crop_at = guess if momentum else None  # the overlap is cut where the last motion puts the scan
+
     @functools.cache
     def from_guess():
         """ICP from the fallback guess and its pairing, computed once however many checks below ask for it."""
-        retry = _icp(moving, fixed, guess, fit, icp, crop_at=guess if momentum else None)
+        retry = _icp(moving, fixed, guess, fit, icp, crop_at=crop_at)
         return retry, paired_and_constraint(retry[0])
 
-    refined = _icp(moving, fixed, T_coarse, fit, icp, crop_at=guess if momentum else None)
+    refined = _icp(moving, fixed, T_coarse, fit, icp, crop_at=crop_at)
     T_fine, rmse = refined
     if rmse > fit.icp_fallback_rmse and fallback is None:
         retry, _ = from_guess()

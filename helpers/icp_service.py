@@ -143,13 +143,14 @@ class IcpService:
         """Register ``moving`` onto ``fixed`` (arrays, prepared through the cache)
         and score the result: ``(T_fixed_moving, surface_rmse)``, an :class:`helpers.icp.IcpResult`."""
         source, target = self.ready(moving), self.ready(fixed)
+        ready_fixed = target  # what the score measures against (normals, k-d tree), whatever ICP aligns on
         if self.metric == "point-to-point":
             source, target = moving, fixed
         fit = self.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
         T = fit.T_fixed_moving
         # the alignment's last pass paired these points with this cloud at T: the score reuses it
-        nearest = fit.nearest if target is self.ready(fixed) else None
-        surface = surface_rmse(moving, self.ready(fixed), T, self.inlier_distance, nearest=nearest)
+        nearest = fit.nearest if target is ready_fixed else None
+        surface = surface_rmse(moving, ready_fixed, T, self.inlier_distance, nearest=nearest)
         return _icp.IcpResult(T, surface, fit.information)
 
     def constraint(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray) -> float:

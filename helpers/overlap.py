@@ -26,9 +26,10 @@ last motion (a first step, a pair registered alone) it registers the whole
 scan first and crops where that put it, then refines once more. Cropping
 after a first registration of the whole scan had left the steps of low
 flights short: the leading edge pulled that first answer back, and over flat
-ground the second registration stayed near it. The edges back register whole scans: cropped, they left the
-default flight's map worse and their step lengths no truer (the ray rows pull
-those longer steps more than the leading edge does; ``benchmarks/bench_bias.py``).
+ground the second registration stayed near it. The edges back register whole
+scans: cropped, they left the default flight's map worse and their step
+lengths no truer (the ray rows pull those longer steps more than the leading
+edge does; ``benchmarks/bench_bias.py``).
 """
 
 from __future__ import annotations

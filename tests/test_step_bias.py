@@ -79,17 +79,27 @@ def test_the_crop_keeps_everything_when_it_cannot_judge():
     assert crop(strip, strip, yawed(0.0, (200.0, 0.0, 0.0)), 2.0) is strip  # no overlap at all
 
 
-@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 90.0])
-def test_icp_with_the_crop_recovers_a_turned_step(yaw_deg):
-    """Two strips of one rolling surface, the second turned and moved: tracking ICP (cropped) from a start
-    0.5 m and 2 degrees off ends on the true motion."""
+STRIPS = Config().with_values(registration={"icp_grid_step": 0.5, "inlier_distance": 2.0})  # for turned_strips
+
+
+def turned_strips(yaw_deg: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Two 40 x 20 m strips of one rolling surface, the second turned by ``yaw_deg`` and moved 6 m on:
+    (moving points in its own frame, fixed points, the true T_fixed_moving)."""
     surface = rectangle(120.0, 120.0, 0.4)
-    config = Config().with_values(registration={"icp_grid_step": 0.5, "inlier_distance": 2.0})
-    assert config.registration.overlap_crop
     T_true = yawed(yaw_deg, (6.0, 2.0, 0.0))
     fixed_points = surface[(np.abs(surface[:, 0]) <= 20) & (np.abs(surface[:, 1]) <= 10)]
     in_moving = (surface - T_true[:3, 3]) @ T_true[:3, :3]  # the surface in the moving frame
     moving_points = in_moving[(np.abs(in_moving[:, 0]) <= 20) & (np.abs(in_moving[:, 1]) <= 10)]
+    return moving_points, fixed_points, T_true
+
+
+@pytest.mark.parametrize("yaw_deg", [0.0, 30.0, 90.0])
+def test_icp_with_the_crop_recovers_a_turned_step(yaw_deg):
+    """Two strips of one rolling surface, the second turned and moved: tracking ICP (cropped) from a start
+    0.5 m and 2 degrees off ends on the true motion."""
+    config = STRIPS
+    assert config.registration.overlap_crop
+    moving_points, fixed_points, T_true = turned_strips(yaw_deg)
     start = yawed(yaw_deg + 2.0, (6.5, 2.0, 0.0))
     pair, _ = track_frames(prepare(moving_points, config), prepare(fixed_points, config), config, start)
     assert np.linalg.norm(pair.T_fine[:3, 3] - T_true[:3, 3]) < 0.05
@@ -102,12 +112,8 @@ def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
     from helpers.frames import _icp
     from helpers.icp_service import IcpService
 
-    surface = rectangle(120.0, 120.0, 0.4)
-    config = Config().with_values(registration={"icp_grid_step": 0.5, "inlier_distance": 2.0})
-    T_true = yawed(10.0, (6.0, 2.0, 0.0))
-    fixed_points = surface[(np.abs(surface[:, 0]) <= 20) & (np.abs(surface[:, 1]) <= 10)]
-    in_moving = (surface - T_true[:3, 3]) @ T_true[:3, :3]
-    moving_points = in_moving[(np.abs(in_moving[:, 0]) <= 20) & (np.abs(in_moving[:, 1]) <= 10)]
+    config = STRIPS
+    moving_points, fixed_points, T_true = turned_strips(10.0)
     moving, fixed = prepare(moving_points, config), prepare(fixed_points, config)
     clouds = []
     real = IcpService.align
