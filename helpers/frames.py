@@ -41,6 +41,7 @@ STAGES = ("downsample", "fpfh", "match", "msac", "icp")
 # points, or has 80 % of its RMSE or less: a drone does not jump, so a tie goes to the flight's momentum.
 BETTER_PAIRED = 0.05
 BETTER_RMSE = 0.8
+SAME_MOTION = 0.1  # two registrations within a tenth of the jump limits of each other land on one motion
 
 
 @dataclass
@@ -212,20 +213,25 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
             )
             refined, T_coarse, constraint = retry, guess, constraint_retry
             T_fine, rmse = retry
-    # 5. A result far from the last motion is doubted: a drone does not jump, and flat or repeating ground (a
-    # lake, a field, a row of roofs) matches itself metres away. On ground too flat to pin the motion, ICP from the
-    # last motion is kept; with the motion guard on, it is the fit's rival anywhere, and the fit must fit clearly
-    # better to stay.
-    slide = float(np.linalg.norm((np.linalg.inv(guess) @ T_fine)[:3, 3]))
+    # 5. A result far from the last motion, or turned from it, is doubted: a drone does not jump or spin, and flat
+    # or repeating ground (a lake, a field, a row of roofs) matches itself metres away or turned half round. On
+    # ground too flat to pin the motion, ICP from the last motion is kept; with the motion guard on, it is the
+    # fit's rival anywhere, and the fit must fit clearly better to stay.
+    jump = np.linalg.inv(guess) @ T_fine
+    slide, turn = float(np.linalg.norm(jump[:3, 3])), rotation_angle_deg(jump)
+    jumped = slide > fit.tracking_max_jump_m or turn > fit.tracking_max_jump_deg
     weak = constraint < WEAK_CONSTRAINT
-    if momentum and (weak or fit.motion_guard) and slide > fit.tracking_max_jump_m and not np.allclose(T_coarse, guess):
+    if momentum and (weak or fit.motion_guard) and jumped and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
-        if weak or not _clearly_better(rmse, paired, retry[1], paired_retry):
+        off = f"{slide:.1f} m and {turn:.0f} deg"
+        # ICP from the last motion landing where the fit did confirms it (a sharp turn the guess lags behind).
+        confirmed = _same_motion(retry[0], T_fine, fit)
+        if not confirmed and (weak or not _clearly_better(rmse, paired, retry[1], paired_retry)):
             fallback = (
-                f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {slide:.1f} m from "
+                f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {off} from "
                 "the last motion; ICP from the last motion kept"
                 if weak
-                else f"the fit ended {slide:.1f} m from the last motion and fits no better than ICP from it (RMSE "
+                else f"the fit ended {off} from the last motion and fits no better than ICP from it (RMSE "
                 f"{rmse:.2f} against {retry[1]:.2f} m, {paired:.0%} against {paired_retry:.0%} of the points "
                 "paired); ICP from the last motion kept"
             )
@@ -260,6 +266,16 @@ def _with_momentum(guess: np.ndarray, refined, config: Config) -> np.ndarray:
         return refined[0]
     sigmas = motion_sigmas(max(float(np.linalg.norm(guess[:3, 3])), 1e-3), config.pose_graph)
     return blended(guess, refined[0], refined.information, sigmas)
+
+
+def _same_motion(T: np.ndarray, T_other: np.ndarray, fit: RegistrationConfig) -> bool:
+    """Whether two registrations land on one motion: within :data:`SAME_MOTION`
+    of the jump limits (``tracking_max_jump_m`` and ``_deg``) of each other."""
+    gap = np.linalg.inv(T) @ T_other
+    return bool(
+        np.linalg.norm(gap[:3, 3]) <= SAME_MOTION * fit.tracking_max_jump_m
+        and rotation_angle_deg(gap) <= SAME_MOTION * fit.tracking_max_jump_deg
+    )
 
 
 def _clearly_better(rmse: float, paired: float, rmse_rival: float, paired_rival: float) -> bool:
