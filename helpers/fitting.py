@@ -56,6 +56,11 @@ GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("ma
 # measured on Autzen at 150 and 250 m and on a sparse tile at 150 m (benchmarks/bench_motion.py): three left
 # half the bias, twelve no better.
 LOW_FLIGHT_LOCAL_MAP = 6
+# A true loop edge's surface RMSE comes from how the two scans sample the ground: rows of rays 0.2 deg apart,
+# so it shrinks with the height (0.26-0.39 m at the reference's 600 m, 0.02-0.13 m on Autzen 150 m above the
+# ground), while a false one, laid on ground metres away, stays at 0.17-0.57 m. The reference's 0.6 m threshold
+# follows the height, but never below this many range-noise sigmas (what two scans of a plane would score).
+LOOP_RMSE_NOISES = 4
 
 
 @dataclass(frozen=True)
@@ -138,6 +143,12 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         ("map", "align_grid_step"): (grid(TUNED_AT.map.align_grid_step * scale), "0.8 x the grid step"),
         ("registration", "max_distance"): (round(ref_fit.max_distance * scale, 2), "follows the grid step"),
         ("registration", "inlier_distance"): (round(ref_fit.inlier_distance * scale, 2), "2 x the grid step"),
+        ("loop_closure", "rmse_threshold"): (
+            round(max(TUNED_AT.loop_closure.rmse_threshold * k, LOOP_RMSE_NOISES * config.sensor.range_noise), 2),
+            f"{k:.2f} x the reference's {TUNED_AT.loop_closure.rmse_threshold} m: a true match's surface RMSE "
+            f"follows the spacing of the ray rows, not below {LOOP_RMSE_NOISES} x the {config.sensor.range_noise} m "
+            "range noise",
+        ),
         ("loop_closure", "sub_map_thresh"): (
             sub_map_thresh,
             f"a loop candidate lies {sub_map_thresh * per_submap:.0f} m of flight back "

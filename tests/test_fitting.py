@@ -14,7 +14,7 @@ def test_the_reference_flight_gets_the_reference_values(default_dataset):
     assert flight.height == pytest.approx(REFERENCE_HEIGHT, abs=1.0) and flight.spacing == pytest.approx(2.0)
     fitted, reasons = fit_to_flight(flight, Config())
     assert fitted == Config()
-    assert len(reasons) == 7 and all(line.startswith("[") for line in reasons)
+    assert len(reasons) == 8 and all(line.startswith("[") for line in reasons)
 
 
 def test_a_low_flight_gets_the_footprint_lengths():
@@ -30,9 +30,10 @@ def test_a_low_flight_gets_the_footprint_lengths():
     assert fitted.registration.inlier_distance == 2.0
     assert fitted.loop_closure.sub_map_thresh == round(270 / 4 / (3 * 1 * 2.0))  # 67.5 m back: 11 submaps
     assert any("a loop candidate lies 66 m of flight back" in line for line in reasons)
+    assert fitted.loop_closure.rmse_threshold == 0.15  # a quarter of the reference's 0.6 m: the rows are 4 x closer
     # every scan accepted: ICP onto the last six scans merged, and no edges back (the map holds their scans)
     assert fitted.registration.icp_local_map == 6 and fitted.pose_graph.edges_back == 1
-    assert len(reasons) == 9
+    assert len(reasons) == 10
     # the rest is the reference's
     untouched = ("neighbors", "match_threshold", "match_ratio")
     assert all(getattr(fitted.features, k) == getattr(Config().features, k) for k in untouched)
@@ -46,6 +47,16 @@ def test_a_high_flight_with_sparse_waypoints():
     assert fitted.features.grid_step == 3.0 and fitted.registration.inlier_distance == 6.0
     assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
     assert fitted.registration.icp_local_map == 1 and fitted.pose_graph.edges_back == Config().pose_graph.edges_back
+    assert fitted.loop_closure.rmse_threshold == 1.2  # rows twice as far apart: a true match scores twice as much
+
+
+def test_the_loop_threshold_never_drops_below_the_range_noise():
+    """40 m above the ground the height would give 0.04 m; two scans of one plane already differ by their range
+    noise, so the threshold stays at 4 of its sigmas, and follows a noisier sensor."""
+    very_low = Flight(height=40.0, spacing=2.0, surface_cell=1.0, strip=3.5)
+    assert fit_to_flight(very_low, Config())[0].loop_closure.rmse_threshold == 0.08
+    noisy = Config().with_values(sensor={"range_noise": 0.05})
+    assert fit_to_flight(very_low, noisy)[0].loop_closure.rmse_threshold == 0.2
 
 
 def test_what_the_user_set_is_kept():
