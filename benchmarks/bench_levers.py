@@ -1,15 +1,16 @@
 """The global workflow's speed levers (issue 22), each alone and combined: CPU ms per accepted scan by stage,
 the coarse fit's error and the odometry's accuracy, on the default flight.
 
-    nice -n 10 .venv/bin/python benchmarks/bench_levers.py [--levers reference msac4 ...] [--blas 1 2]
+    nice -n 10 .venv/bin/python benchmarks/bench_levers.py [--levers defaults msac ...] [--blas 1 2]
         [--scans 120] [--set table.key=value ...]
 
-Levers (named combinations of existing options; ``reference`` is today's defaults):
+Levers (named combinations of existing options; ``defaults`` is today's, whose robust fit is the
+yaw-and-translation one, ``robust_fit = "msac4"``):
 
-* ``msac4``: ``[registration] robust_fit = "msac4"``, the yaw-and-translation fit;
+* ``msac``: ``[registration] robust_fit = "msac"``, the reference's rigid fit;
 * ``grid2``: ``[features] grid_step = 2.0, neighbors = 40`` (the reference's 1.5 m and 60);
 * ``grid3``: ``[features] grid_step = 3.0, neighbors = 30``;
-* ``msac4+grid2``, ``msac4+grid3``: both.
+* ``msac+grid2``, ``msac+grid3``: both.
 
 Each lever runs the odometry of the default flight's first ``--scans`` accepted scans in a fresh process,
 once per ``--blas`` thread count (``OPENBLAS_NUM_THREADS`` of that process: numpy's BLAS, which the
@@ -37,12 +38,12 @@ from pathlib import Path
 from types import SimpleNamespace
 
 LEVERS = {
-    "reference": [],
-    "msac4": ["registration.robust_fit=msac4"],
+    "defaults": [],
+    "msac": ["registration.robust_fit=msac"],
     "grid2": ["features.grid_step=2.0", "features.neighbors=40"],
     "grid3": ["features.grid_step=3.0", "features.neighbors=30"],
-    "msac4+grid2": ["registration.robust_fit=msac4", "features.grid_step=2.0", "features.neighbors=40"],
-    "msac4+grid3": ["registration.robust_fit=msac4", "features.grid_step=3.0", "features.neighbors=30"],
+    "msac+grid2": ["registration.robust_fit=msac", "features.grid_step=2.0", "features.neighbors=40"],
+    "msac+grid3": ["registration.robust_fit=msac", "features.grid_step=3.0", "features.neighbors=30"],
 }
 COLUMNS = ("fpfh", "match", "msac", "icp")  # printed stages; downsampling is added to ICP's column
 

@@ -110,9 +110,9 @@ class RegistrationConfig(BoundedTable):
     )
     seed: int = param(0, "seed of the robust fit's sampling")
     robust_fit: str = param(
-        "msac",
-        "robust fit: msac (rigid, samples of 3 matches: the reference) or msac4 (yaw and translation, "
-        "samples of 2, its trial cap fitted to max_num_trials; ICP finds the tilt)",
+        "msac4",
+        "robust fit: msac4 (yaw and translation from samples of 2 matches, its trial cap fitted to "
+        "max_num_trials; ICP finds the tilt) or msac (rigid, samples of 3: the reference)",
     )
     metric: str = param("plane-to-plane", "ICP metric: point-to-point, point-to-plane, plane-to-plane", "metric")
     inlier_distance: float = param(3.0, "ICP ignores correspondences farther apart than this, metres", "inlierDistance")
@@ -143,7 +143,7 @@ class RegistrationConfig(BoundedTable):
         "a step that ends this far (m) from the last motion is doubted (tracking: registered globally; global: "
         "ICP from the last motion too)",
     )
-    tracking_max_jump_deg: float = param(6.0, "tracking: ... or turns this much (deg) more or less than it")
+    tracking_max_jump_deg: float = param(6.0, "... or turns this much (deg) more or less than it")
     tracking_min_overlap: float = param(
         0.8,
         "a registration pairing a smaller share of its points is doubted "
@@ -276,7 +276,7 @@ class Config:
 
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
-    "registration": {"icp_grid_step": 0.0, "overlap_crop": False, "motion_guard": False},
+    "registration": {"robust_fit": "msac", "icp_grid_step": 0.0, "overlap_crop": False, "motion_guard": False},
     "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth", "skip_after_loop": 0},
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }

@@ -277,7 +277,7 @@ def test_robust_fit_runs_the_fit_the_configuration_names():
     from helpers.registration import robust_fit
 
     moving, fixed, truth, outliers = _matches_with_outliers(outlier_fraction=0.5)
-    rigid = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3))
+    rigid = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3, robust_fit="msac"))
     expected = estimate_rigid_msac(moving, fixed, 0.3, 3000)
     np.testing.assert_array_equal(rigid[0], expected[0])
     yaw = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3, robust_fit="msac4", seed=2))
@@ -307,7 +307,8 @@ def test_the_configuration_refuses_an_unknown_robust_fit():
     from helpers.config import Config, RegistrationConfig
     from helpers.configfile import config_from_dict
 
-    assert RegistrationConfig().robust_fit == "msac"  # the reference's fit stays the default
+    assert RegistrationConfig().robust_fit == "msac4"  # ours: yaw and translation
+    assert Config.reference().registration.robust_fit == "msac"  # the reference's rigid fit one call away
     with pytest.raises(SlamError, match=r"\[registration\] robust_fit must be one of msac, msac4, got 'ransac'"):
         Config().with_values(registration={"robust_fit": "ransac"})
     with pytest.raises(SlamError, match="robust_fit must be one of msac, msac4"):

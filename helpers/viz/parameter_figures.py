@@ -166,29 +166,29 @@ def descriptor_distance_figure(examples: dict, threshold: float, ratio: float):
     return fig
 
 
-def trials_formula_figure(max_trials: int = 3000, confidences=(0.9, 0.99, 0.999), sample: int = 3):
+def trials_formula_figure(max_trials: int = 3000, confidences=(0.9, 0.99, 0.999), pairs_cap: int | None = None):
     """Trials the robust fit needs against the share ``w`` of correct matches:
     ``N = log(1 - p) / log(1 - w^3)`` for a few confidences ``p``, with the
-    ``max_num_trials`` cap."""
+    ``max_num_trials`` cap; given ``pairs_cap``, also samples of 2 at the middle
+    confidence (dashed) with their cap."""
     w = np.linspace(0.04, 0.8, 400)
     fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
     for p, color in zip(confidences, ("#9ecae1", "#3182bd", "#08519c"), strict=False):
-        ax.plot(w, np.log(1 - p) / np.log1p(-(w**sample)), color=color, lw=2, label=f"confidence p = {p:g}")
-    ax.axhline(max_trials, color="black", ls=":", lw=1.4)
-    ax.annotate(
-        f"max_num_trials = {max_trials}",
-        (0.8, max_trials),
-        xytext=(-4, 4),
-        textcoords="offset points",
-        ha="right",
-        fontsize=9,
-    )
+        ax.plot(w, np.log(1 - p) / np.log1p(-(w**3)), color=color, lw=2, label=f"samples of 3, confidence p = {p:g}")
+    caps = [(max_trials, f"max_num_trials = {max_trials}")]
+    if pairs_cap is not None:
+        p = confidences[len(confidences) // 2]
+        ax.plot(w, np.log(1 - p) / np.log1p(-(w**2)), color="#e6550d", lw=2, ls="--", label=f"samples of 2, p = {p:g}")
+        caps.append((pairs_cap, f"its cap for samples of 2 = {pairs_cap}"))
+    for cap, label in caps:
+        ax.axhline(cap, color="black", ls=":", lw=1.4)
+        ax.annotate(label, (0.8, cap), xytext=(-4, 4), textcoords="offset points", ha="right", fontsize=9)
     ax.set(
         xscale="linear",
         yscale="log",
         xlabel="w, share of correct matches",
         ylabel="trials N",
-        title=r"trials for one all-correct sample of 3: $N = \log(1-p)\,/\,\log(1-w^3)$",
+        title=r"trials for one all-correct sample of $s$ matches: $N = \log(1-p)\,/\,\log(1-w^s)$",
         xlim=(0.04, 0.8),
     )
     _grid(ax)
