@@ -32,6 +32,12 @@ MUTANTS = {
         "    return _uncentre(best, moving_centre, fixed_centre), best_inliers\n",
         "    return np.eye(4), best_inliers\n",
     ),
+    "the yaw fit returns the identity": (
+        "tests/test_fit4dof.py",
+        "helpers/fit4dof.py",
+        "    return YawFit(T, best_inliers, float(best_cost), drawn)\n",
+        "    return YawFit(np.eye(4), best_inliers, float(best_cost), drawn)\n",
+    ),
     "loop closure disabled": (
         "tests/test_pipeline.py",
         "helpers/loopclosure.py",
