@@ -6,7 +6,8 @@ ready (normals and generalized-ICP covariances); that preparation serves
 twice, as the moving scan of one pair and the fixed scan of the next.
 :func:`register_frames` matches descriptors, fits a transform robustly
 (MSAC, rigid or yaw and translation: ``[registration] robust_fit``) and
-refines it by ICP; :func:`track_frames` runs ICP alone from the
+refines it by ICP, the flight's last motion guarding each step
+(:mod:`helpers.motion_guard`); :func:`track_frames` runs ICP alone from the
 last motion. The ICP stops when an iteration changes its RMSE by less than
 ``[registration] icp_tolerance`` metres and its inlier fraction by less than
 that fraction (a tighter criterion sometimes oscillates by a few inliers
@@ -27,21 +28,15 @@ import numpy as np
 
 from .config import Config, RegistrationConfig
 from .errors import SlamError
-from .factors import motion_sigmas
 from .features import grid_average, keypoint_fpfh, match_features
-from .geometry import check_points, rotation_angle_deg
+from .geometry import check_points
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
-from .information import blended
+from .motion_guard import BETTER_PAIRED, SAME_MOTION, beyond, clearly_better, offset, with_momentum
 from .overlap import crop, cropped_cloud
 from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
-# A fit that ends far from the last motion beats ICP from the last motion only when it pairs 5 % more of the
-# points, or has 80 % of its RMSE or less: a drone does not jump, so a tie goes to the flight's momentum.
-BETTER_PAIRED = 0.05
-BETTER_RMSE = 0.8
-SAME_MOTION = 0.1  # two registrations within a tenth of the jump limits of each other land on one motion
 
 
 @dataclass
@@ -116,14 +111,13 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     start = time.perf_counter()
     refined = _icp(moving, fixed, motion, fit, icp, crop_at=motion)
     T_fine, rmse = refined
-    jump = np.linalg.inv(motion) @ T_fine
-    jump_m, jump_deg = np.linalg.norm(jump[:3, 3]), rotation_angle_deg(jump)
+    jump_m, jump_deg = offset(motion, T_fine)
     paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
     timings = {"icp": _ms(start)}
     reasons = []
     if not rmse <= fit.icp_fallback_rmse:
         reasons.append(f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m")
-    if jump_m > fit.tracking_max_jump_m or jump_deg > fit.tracking_max_jump_deg:
+    if beyond((jump_m, jump_deg), fit):
         reasons.append(f"{jump_m:.2f} m and {jump_deg:.2f} deg from the last motion")
     if paired < fit.tracking_min_overlap:
         reasons.append(f"{paired:.0%} of the points paired")
@@ -217,16 +211,14 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     # or repeating ground (a lake, a field, a row of roofs) matches itself metres away or turned half round. On
     # ground too flat to pin the motion, ICP from the last motion is kept; with the motion guard on, it is the
     # fit's rival anywhere, and the fit must fit clearly better to stay.
-    jump = np.linalg.inv(guess) @ T_fine
-    slide, turn = float(np.linalg.norm(jump[:3, 3])), rotation_angle_deg(jump)
-    jumped = slide > fit.tracking_max_jump_m or turn > fit.tracking_max_jump_deg
+    slide, turn = offset(guess, T_fine)
     weak = constraint < WEAK_CONSTRAINT
-    if momentum and (weak or fit.motion_guard) and jumped and not np.allclose(T_coarse, guess):
+    if momentum and (weak or fit.motion_guard) and beyond((slide, turn), fit) and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
         off = f"{slide:.1f} m and {turn:.0f} deg"
         # ICP from the last motion landing where the fit did confirms it (a sharp turn the guess lags behind).
-        confirmed = _same_motion(retry[0], T_fine, fit)
-        if not confirmed and (weak or not _clearly_better(rmse, paired, retry[1], paired_retry)):
+        confirmed = not beyond(offset(retry[0], T_fine), fit, SAME_MOTION)
+        if not confirmed and (weak or not clearly_better(rmse, paired, retry[1], paired_retry)):
             fallback = (
                 f"ground too flat to pin the motion (constraint {constraint:.4f}): the fit ended {off} from "
                 "the last motion; ICP from the last motion kept"
@@ -240,7 +232,7 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     # 6. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
     if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
-        T_fine = _with_momentum(guess, refined, config)
+        T_fine = with_momentum(guess, refined, config)
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,
@@ -254,36 +246,6 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
         fallback,
         constraint=constraint,
         information=refined.information,
-    )
-
-
-def _with_momentum(guess: np.ndarray, refined, config: Config) -> np.ndarray:
-    """ICP's ``refined`` motion blended with the last motion ``guess``
-    (:func:`helpers.information.blended`): the guess is as sure as a drone's
-    ``[pose_graph] motion_acceleration`` allows over one step (the sigmas of the
-    motion factor). Without an information (point-to-point ICP), ICP's motion."""
-    if refined.information is None:
-        return refined[0]
-    sigmas = motion_sigmas(max(float(np.linalg.norm(guess[:3, 3])), 1e-3), config.pose_graph)
-    return blended(guess, refined[0], refined.information, sigmas)
-
-
-def _same_motion(T: np.ndarray, T_other: np.ndarray, fit: RegistrationConfig) -> bool:
-    """Whether two registrations land on one motion: within :data:`SAME_MOTION`
-    of the jump limits (``tracking_max_jump_m`` and ``_deg``) of each other."""
-    gap = np.linalg.inv(T) @ T_other
-    return bool(
-        np.linalg.norm(gap[:3, 3]) <= SAME_MOTION * fit.tracking_max_jump_m
-        and rotation_angle_deg(gap) <= SAME_MOTION * fit.tracking_max_jump_deg
-    )
-
-
-def _clearly_better(rmse: float, paired: float, rmse_rival: float, paired_rival: float) -> bool:
-    """Whether a registration (``rmse`` m, ``paired`` share) fits clearly better
-    than its rival: it pairs :data:`BETTER_PAIRED` more of the points, or has
-    :data:`BETTER_RMSE` of the rival's RMSE or less while pairing about as many."""
-    return paired > paired_rival + BETTER_PAIRED or (
-        rmse <= BETTER_RMSE * rmse_rival and paired >= paired_rival - BETTER_PAIRED / 2
     )
 
 

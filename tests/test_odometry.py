@@ -234,7 +234,7 @@ def test_a_sharp_turn_the_guess_lags_behind_is_confirmed_not_doubted(monkeypatch
     """Entering a sharp turn, the last motion turns 10 degrees less than the step: the fit is doubted, ICP
     runs from the last motion too and lands on the same motion, which confirms the fit. No fallback is
     recorded (20 of 45 steps of a tight test loop were before this), and the fit's answer stands."""
-    from test_step_bias import STRIPS, turned_strips
+    from test_step_bias import STRIPS, turned_strips, yawed
 
     import helpers.frames as frames
 
@@ -242,19 +242,12 @@ def test_a_sharp_turn_the_guess_lags_behind_is_confirmed_not_doubted(monkeypatch
     moving_points, fixed_points, truth = turned_strips(10.0)
     monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (truth, np.zeros(0, bool)))
     moving, fixed = (frames.describe(prepare(p, config), config) for p in (moving_points, fixed_points))
-    lagging = truth @ np.linalg.inv(_yaw(10.0))
+    lagging = truth @ np.linalg.inv(yawed(10.0, (0.0, 0.0, 0.0)))
     pair = register_frames(moving, fixed, config, guess=lagging)
     assert pair.fallback is None, pair.fallback
     assert np.array_equal(pair.T_coarse, truth)
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.05
     assert rotation_angle_deg(np.linalg.inv(truth) @ pair.T_fine) < 0.2
-
-
-def _yaw(degrees: float) -> np.ndarray:
-    c, s = np.cos(np.radians(degrees)), np.sin(np.radians(degrees))
-    T = np.eye(4)
-    T[:2, :2] = [[c, -s], [s, c]]
-    return T
 
 
 def test_the_guess_ignores_one_wrong_step():
