@@ -68,6 +68,11 @@ class PairRegistration:
     constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
     information: np.ndarray | None = None  # 6 x 6 of T_fine, translation first, as the ICP service calibrates it
 
+    def blind(self, motion: np.ndarray) -> bool:
+        """Whether this step measured nothing: ICP started from ``motion`` (the last motion) on ground too flat
+        to move it (no fit, or the fit doubted)."""
+        return bool(self.constraint < WEAK_CONSTRAINT and np.allclose(self.T_coarse, motion))
+
 
 def prepare(scan: np.ndarray, config: Config) -> Frame:
     """Downsample one scan, describe it (not yet in tracking mode: see
@@ -138,12 +143,17 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     return pair, "; ".join(reasons)
 
 
-def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None, icp=None):
+def register_frames(
+    moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None, icp=None, stale: int = 0
+):
     """Register ``moving`` onto ``fixed``; ``guess`` (4 x 4) is the fallback
     initial transform (identity if None) when the robust fit fails or ICP
     ends far off. Never raises on a hard pair: the reason is in ``fallback``.
     ``icp`` is the run's :class:`helpers.icp_service.IcpService` (one from
-    ``[registration]`` when None)."""
+    ``[registration]`` when None). ``stale``: the steps since the scans last
+    measured the motion (it crossed a lake): the drone may have begun a turn
+    meanwhile, so the motion guard's turn limit and the guess's rotation sigmas
+    are ``1 + stale`` times wider."""
     momentum = guess is not None  # a last motion to fall back on (not the first step's identity)
     guess = np.eye(4) if guess is None else guess
     features, fit = config.features, config.registration
@@ -213,7 +223,8 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     # fit's rival anywhere, and the fit must fit clearly better to stay.
     slide, turn = offset(guess, T_fine)
     weak = constraint < WEAK_CONSTRAINT
-    if momentum and (weak or fit.motion_guard) and beyond((slide, turn), fit) and not np.allclose(T_coarse, guess):
+    doubted = beyond((slide, turn), fit, turn=1 + stale)
+    if momentum and (weak or fit.motion_guard) and doubted and not np.allclose(T_coarse, guess):
         retry, (paired_retry, constraint_retry) = from_guess()
         off = f"{slide:.1f} m and {turn:.0f} deg"
         # ICP from the last motion landing where the fit did confirms it (a sharp turn the guess lags behind).
@@ -232,7 +243,7 @@ def register_frames(moving: Frame, fixed: Frame, config: Config, guess: np.ndarr
     # 6. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
     if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
-        T_fine = with_momentum(guess, refined, config)
+        T_fine = with_momentum(guess, refined, config, 1 + stale)
     timings["icp"] = _ms(start)
     return PairRegistration(
         moving.points,

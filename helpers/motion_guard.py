@@ -33,11 +33,11 @@ def offset(T: np.ndarray, T_other: np.ndarray) -> tuple[float, float]:
     return float(np.linalg.norm(gap[:3, 3])), rotation_angle_deg(gap)
 
 
-def beyond(metres_degrees: tuple[float, float], fit: RegistrationConfig, share: float = 1.0) -> bool:
+def beyond(metres_degrees: tuple[float, float], fit: RegistrationConfig, share: float = 1.0, turn: float = 1.0) -> bool:
     """Whether an :func:`offset` exceeds ``share`` of the jump limits
-    (``tracking_max_jump_m`` or ``tracking_max_jump_deg``)."""
+    (``tracking_max_jump_m`` or ``turn`` times ``tracking_max_jump_deg``)."""
     metres, degrees = metres_degrees
-    return metres > share * fit.tracking_max_jump_m or degrees > share * fit.tracking_max_jump_deg
+    return metres > share * fit.tracking_max_jump_m or degrees > share * turn * fit.tracking_max_jump_deg
 
 
 def clearly_better(rmse: float, paired: float, rmse_rival: float, paired_rival: float) -> bool:
@@ -49,12 +49,14 @@ def clearly_better(rmse: float, paired: float, rmse_rival: float, paired_rival: 
     )
 
 
-def with_momentum(guess: np.ndarray, refined, config: Config) -> np.ndarray:
+def with_momentum(guess: np.ndarray, refined, config: Config, widen: float = 1.0) -> np.ndarray:
     """ICP's ``refined`` motion blended with the last motion ``guess``
     (:func:`helpers.information.blended`): the guess is as sure as a drone's
     ``[pose_graph] motion_acceleration`` allows over one step (the sigmas of the
-    motion factor). Without an information (point-to-point ICP), ICP's motion."""
+    motion factor), its rotation's ``widen`` times wider for a guess that old
+    (steps since the motion was last measured). Without an information (point-to-point ICP), ICP's motion."""
     if refined.information is None:
         return refined[0]
     sigmas = motion_sigmas(max(float(np.linalg.norm(guess[:3, 3])), 1e-3), config.pose_graph)
+    sigmas[3:] *= widen  # a turn builds up unseen; the speed changes slowly (translation first, as ICP's)
     return blended(guess, refined[0], refined.information, sigmas)

@@ -25,6 +25,7 @@ from .frames import STAGES, Frame, PairRegistration, describe, prepare, register
 from .geometry import check_points, check_pose, transform_points
 from .icp import icp_cloud
 from .icp_service import IcpService
+from .motion_guard import beyond, offset
 from .progress import progress_bar
 
 log = logging.getLogger(__name__)
@@ -39,6 +40,7 @@ __all__ = [
     "prepare",
     "register_frames",
     "register_pair",
+    "staleness",
 ]
 
 
@@ -80,6 +82,8 @@ class Odometry:
         self._pairs: list[PairRegistration] = []
         self._timings: list[dict] = []
         self.fallbacks: list[tuple[int, str]] = []
+        self.blind: list[bool] = []  # per step: its motion is the last motion's, the scans pinned nothing
+        self.jumped: list[bool] = []  # per step: it ended beyond the jump limits from its guess, and was kept
         self._recent: list[Frame] = []  # the last [registration] icp_local_map frames, oldest first: the previous last
         self._tracking = config.registration.mode == "tracking"
 
@@ -92,8 +96,9 @@ class Odometry:
         else:
             previous = recent[-1] if recent else None
         mapped_ms = 1000.0 * (time.perf_counter() - start)
+        stale = 0  # steps the guess stands on that measured nothing (see staleness)
         if config.registration.motion_guard:
-            motion = predicted_motion(self.relative)
+            motion, stale = predicted_motion(self.relative, self.blind, self.jumped), staleness(self.blind)
         else:  # the reference's: the last step
             motion = self.relative[-1] if self.relative else None
         timings, pair = dict.fromkeys(STAGES, 0.0), None
@@ -111,7 +116,9 @@ class Odometry:
                 described = previous.timings.get("fpfh", 0.0)
                 describe(previous, config)
                 timings["fpfh"] += previous.timings.get("fpfh", 0.0) - described
-                pair = register_frames(describe(frame, config), previous, config, guess=motion, icp=self.icp)
+                pair = register_frames(
+                    describe(frame, config), previous, config, guess=motion, icp=self.icp, stale=stale
+                )
             for stage, ms in pair.timings.items():
                 timings[stage] += ms
             if pair.fallback:
@@ -119,6 +126,9 @@ class Odometry:
                 log.info("scan %d: %s", index, pair.fallback)  # counted, and summed up by helpers.health
             # 3. Chain the relative motion onto the previous pose.
             self.relative.append(pair.T_fine)
+            self.blind.append(motion is not None and pair.blind(motion))
+            far = motion is not None and beyond(offset(motion, pair.T_fine), config.registration, turn=1 + stale)
+            self.jumped.append(bool(far))
             self.poses.append(self.poses[-1] @ pair.T_fine)
             self._pairs.append(pair)
         for stage, ms in frame.timings.items():
@@ -169,7 +179,7 @@ def local_map(recent: list[Frame], poses: list[np.ndarray], config: Config) -> F
     return dataclasses.replace(recent[-1], icp_points=merged, icp=icp_cloud(merged, fit.metric, fit.icp_backend))
 
 
-def predicted_motion(relative: list[np.ndarray], window: int = 3) -> np.ndarray | None:
+def predicted_motion(relative: list[np.ndarray], blind=(), jumped=(), window: int = 3) -> np.ndarray | None:
     """The constant-velocity guess for the next step: of the last ``window``
     steps (4 x 4 each), the one nearest the others (the medoid of their
     translations), or the last when fewer than three were made (None before any).
@@ -180,15 +190,36 @@ def predicted_motion(relative: list[np.ndarray], window: int = 3) -> np.ndarray 
     flat to correct it the error is kept for good (on a low flight over a
     parking lot, one 6 m mistake became 380 m). The medoid of three follows a
     steady change of speed or turn within a step and ignores one wrong step.
+
+    ``blind`` and ``jumped`` (bools per step, or for the newest steps only):
+    after a blind step (:func:`staleness`) the guess is the last step, unless
+    it jumped (ended beyond the jump limits from its own guess). Blind steps
+    are the momentum and the little ICP found (over a lake, the yaw of a turn
+    begun): the newest of them carries the rest, and the first step measured
+    after them is the freshest news of the motion; the older ones in the
+    window would drag the guess back to where the flight was.
     """
     if not relative:
         return None
     last = relative[-window:]
-    if len(last) < 3:
+    after_blind = len(blind) >= 2 and blind[-2] and not (jumped and jumped[-1])
+    if len(last) < 3 or after_blind:
         return last[-1]
     t = np.array([step[:3, 3] for step in last])
     spread = np.linalg.norm(t[:, None] - t[None], axis=2).sum(axis=1)
     return last[len(last) - 1 - int(np.argmin(spread[::-1]))]  # on a tie (a steady flight), the newest
+
+
+def staleness(blind: list[bool], window: int = 3) -> int:
+    """How many steps the guess (:func:`predicted_motion` over ``window``
+    steps) stands on measured nothing: the blind steps in its window, or all
+    of the blind steps in a row that end the list when there are more.
+    ``blind``: per step, whether its motion is the last motion's (ICP from it
+    on ground too flat to move it: a lake, with no fit). Over a lake the drone
+    may begin a turn nobody sees; the first step measured after it turns away
+    from the guess by as much as the turn grew meanwhile."""
+    in_a_row = len(blind) - next((k + 1 for k in range(len(blind) - 1, -1, -1) if not blind[k]), 0)
+    return max(in_a_row, int(sum(blind[-window:])))
 
 
 def accepted_indices(n_scans: int, config: Config) -> np.ndarray:

@@ -44,6 +44,12 @@ MUTANTS = {
         "        if len(self.submaps) <= self.settings.sub_map_thresh:\n",
         "        if True:\n",
     ),
+    "the odometry never sees a step that measured nothing": (
+        "tests/test_odometry.py",
+        "helpers/odometry.py",
+        "            self.blind.append(motion is not None and pair.blind(motion))\n",
+        "            self.blind.append(False)\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",
