@@ -8,7 +8,8 @@ more than ``tracking_max_jump_m`` from the last motion, or turned more than
 last motion is then its rival, and a tie goes to the flight's momentum
 (:func:`clearly_better`). Two registrations within :data:`SAME_MOTION` of those
 limits of each other land on one motion, and ICP from the last motion landing
-where the fit did confirms the fit.
+where the fit did confirms the fit. After steps that measured nothing (over
+water) the turn limit widens with them (``turn`` in :func:`beyond`).
 """
 
 from __future__ import annotations
@@ -53,8 +54,9 @@ def with_momentum(guess: np.ndarray, refined, config: Config, widen: float = 1.0
     """ICP's ``refined`` motion blended with the last motion ``guess``
     (:func:`helpers.information.blended`): the guess is as sure as a drone's
     ``[pose_graph] motion_acceleration`` allows over one step (the sigmas of the
-    motion factor), its rotation's ``widen`` times wider for a guess that old
-    (steps since the motion was last measured). Without an information (point-to-point ICP), ICP's motion."""
+    motion factor), its rotation ``widen`` times less sure when the guess is
+    old (:func:`helpers.odometry.staleness`: the drone may have begun a turn
+    unseen). Without an information (point-to-point ICP), ICP's motion."""
     if refined.information is None:
         return refined[0]
     sigmas = motion_sigmas(max(float(np.linalg.norm(guess[:3, 3])), 1e-3), config.pose_graph)
