@@ -240,7 +240,20 @@ def register_frames(
             )
             refined, constraint = retry, constraint_retry
             T_coarse, (T_fine, rmse) = guess, refined
-    # 6. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
+    # 6. A fit that stays metres from the last motion because ICP from it slid the same way may be the crop's
+    # doing: on flat ground the overlap alone lets both slide along the track. The whole scan from the last
+    # motion, landing within the jump limits of it, is kept instead (a drone does not jump).
+    if momentum and fit.motion_guard and fit.overlap_crop and slide > fit.tracking_max_jump_m and doubted:
+        if not np.allclose(T_coarse, guess):
+            uncropped = _icp(moving, fixed, guess, fit, icp, whole=True)
+            if not beyond(offset(guess, uncropped[0]), fit) and uncropped[1] < fit.icp_fallback_rmse:
+                fallback = (
+                    f"the fit ended {slide:.1f} m from the last motion and stayed; ICP on the whole scan from the "
+                    f"last motion lands within the jump limits (RMSE {uncropped[1]:.2f} m) and is kept"
+                )
+                refined, T_coarse, (T_fine, rmse) = uncropped, guess, uncropped
+                constraint = paired_and_constraint(T_fine)[1]
+    # 7. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
     if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
         T_fine = with_momentum(guess, refined, config, 1 + stale)
@@ -271,14 +284,22 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
     return result
 
 
-def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: RegistrationConfig, icp=None, crop_at=None):
+def _icp(
+    moving: Frame,
+    fixed: Frame,
+    T_fixed_moving: np.ndarray,
+    fit: RegistrationConfig,
+    icp=None,
+    crop_at=None,
+    whole=False,
+):
     """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``,
     an :class:`helpers.icp.IcpResult` with its information.
 
     With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a
     first ICP on the whole scan put it, and registered again; given ``crop_at`` (4 x 4: the last motion,
     within a few decimetres on a steady flight), it is cropped there and registered once: the crop's
-    margin is the inlier distance, metres."""
+    margin is the inlier distance, metres. ``whole``: the whole scan, registered once."""
     wanted = (fit.metric, fit.icp_backend)
     source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
     target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
@@ -293,7 +314,7 @@ def _icp(moving: Frame, fixed: Frame, T_fixed_moving: np.ndarray, fit: Registrat
     if fit.overlap_crop and crop_at is not None:
         return icp.align(moving=cropped_at(crop_at), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
     refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
-    if fit.overlap_crop:  # again on the overlap where ICP put the scan
+    if fit.overlap_crop and not whole:  # again on the overlap where ICP put the scan
         T = refined[0]
         cropped = cropped_at(T)
         if cropped is not source:  # the result, information included, of the registration on the overlap

@@ -323,6 +323,29 @@ def test_a_turn_begun_over_water_is_followed(autzen):
     assert max(errors) < 1.0, np.round(errors, 2)
 
 
+def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan():
+    """150 m above the sparse tile with the speed swinging, the step from scan 88 to 89 registered on the
+    overlap slides 2.9 m along the track, from the fit and from the true last motion alike (constraint 0.0065,
+    just above the weak bar): the crop leaves a strip too short to pin it. A drone does not jump: ICP on the
+    whole scan from the last motion lands within the jump limits of it and is kept."""
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_flights import build_flight
+
+    from helpers.frames import describe
+
+    data, config = build_flight({"name": "sparse-150", "laps": 2, "swing": 0.3, "set": [], "map_error": False})
+    assert config.registration.overlap_crop and config.registration.motion_guard
+    fixed, moving = (describe(prepare(data.scans[k], config), config) for k in (88, 89))
+    truth = np.linalg.inv(data.poses[88]) @ data.poses[89]
+    last_motion = np.linalg.inv(data.poses[87]) @ data.poses[88]
+    pair = register_frames(moving, fixed, config, guess=last_motion)
+    assert "whole scan" in (pair.fallback or ""), pair.fallback
+    assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.5
+    assert rotation_angle_deg(np.linalg.inv(truth) @ pair.T_fine) < 0.5
+
+
 def test_the_local_map_holds_the_last_scans_in_the_previous_frame(flight):
     """Three scans carried into the last one's frame by their true poses:
     the local map covers all three footprints (it reaches back along the
