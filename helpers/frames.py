@@ -26,14 +26,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .config import Config, RegistrationConfig
+from .config import Config
 from .errors import SlamError
 from .features import grid_average, keypoint_fpfh, match_features
 from .geometry import check_points
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
 from .motion_guard import BETTER_PAIRED, SAME_MOTION, beyond, clearly_better, offset, with_momentum
-from .overlap import crop, cropped_cloud
+from .overlap import overlap_icp
 from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
@@ -114,7 +114,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     guess, or fewer than ``tracking_min_overlap`` of the points paired."""
     fit = config.registration
     start = time.perf_counter()
-    refined = _icp(moving, fixed, motion, fit, icp, crop_at=motion)
+    refined = overlap_icp(moving, fixed, motion, fit, icp, crop_at=motion)
     T_fine, rmse = refined
     jump_m, jump_deg = offset(motion, T_fine)
     paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
@@ -191,10 +191,10 @@ def register_frames(
     @functools.cache
     def from_guess():
         """ICP from the fallback guess and its pairing, computed once however many checks below ask for it."""
-        retry = _icp(moving, fixed, guess, fit, icp, crop_at=crop_at)
+        retry = overlap_icp(moving, fixed, guess, fit, icp, crop_at=crop_at)
         return retry, paired_and_constraint(retry[0])
 
-    refined = _icp(moving, fixed, T_coarse, fit, icp, crop_at=crop_at)
+    refined = overlap_icp(moving, fixed, T_coarse, fit, icp, crop_at=crop_at)
     T_fine, rmse = refined
     if rmse > fit.icp_fallback_rmse and fallback is None:
         retry, _ = from_guess()
@@ -243,16 +243,16 @@ def register_frames(
     # 6. A fit that stays metres from the last motion because ICP from it slid the same way may be the crop's
     # doing: on flat ground the overlap alone lets both slide along the track. The whole scan from the last
     # motion, landing within the jump limits of it, is kept instead (a drone does not jump).
-    if momentum and fit.motion_guard and fit.overlap_crop and slide > fit.tracking_max_jump_m and doubted:
-        if not np.allclose(T_coarse, guess):
-            uncropped = _icp(moving, fixed, guess, fit, icp, whole=True)
-            if not beyond(offset(guess, uncropped[0]), fit) and uncropped[1] < fit.icp_fallback_rmse:
-                fallback = (
-                    f"the fit ended {slide:.1f} m from the last motion and stayed; ICP on the whole scan from the "
-                    f"last motion lands within the jump limits (RMSE {uncropped[1]:.2f} m) and is kept"
-                )
-                refined, T_coarse, (T_fine, rmse) = uncropped, guess, uncropped
-                constraint = paired_and_constraint(T_fine)[1]
+    stayed = not np.allclose(T_coarse, guess)
+    if momentum and fit.motion_guard and fit.overlap_crop and slide > fit.tracking_max_jump_m and stayed:
+        uncropped = overlap_icp(moving, fixed, guess, fit, icp, whole=True)
+        if not beyond(offset(guess, uncropped[0]), fit) and uncropped[1] < fit.icp_fallback_rmse:
+            fallback = (
+                f"the fit ended {slide:.1f} m from the last motion and stayed; ICP on the whole scan from the "
+                f"last motion lands within the jump limits (RMSE {uncropped[1]:.2f} m) and is kept"
+            )
+            refined, T_coarse, (T_fine, rmse) = uncropped, guess, uncropped
+            constraint = paired_and_constraint(T_fine)[1]
     # 7. What the ground does not pin follows the flight's momentum: on weak ground, ICP's answer and the last
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
     if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
@@ -282,44 +282,6 @@ def register_pair(moving_scan, fixed_scan, config: Config | None = None, guess=N
     result = register_frames(moving, fixed, config, guess)
     result.timings = _add(moving.timings, result.timings)
     return result
-
-
-def _icp(
-    moving: Frame,
-    fixed: Frame,
-    T_fixed_moving: np.ndarray,
-    fit: RegistrationConfig,
-    icp=None,
-    crop_at=None,
-    whole=False,
-):
-    """ICP between the frames' prepared clouds (bare points for a Frame built by hand): ``(T_fixed_moving, rmse)``,
-    an :class:`helpers.icp.IcpResult` with its information.
-
-    With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a
-    first ICP on the whole scan put it, and registered again; given ``crop_at`` (4 x 4: the last motion,
-    within a few decimetres on a steady flight), it is cropped there and registered once: the crop's
-    margin is the inlier distance, metres. ``whole``: the whole scan, registered once."""
-    wanted = (fit.metric, fit.icp_backend)
-    source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
-    target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
-    icp = icp or IcpService.from_config(fit)
-    cap = fit.icp_max_iterations
-
-    def cropped_at(T):  # the moving points the fixed scan also saw, at T (helpers.overlap)
-        if isinstance(source, IcpCloud):
-            return cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
-        return crop(source, fixed.icp_points, T, fit.inlier_distance)
-
-    if fit.overlap_crop and crop_at is not None:
-        return icp.align(moving=cropped_at(crop_at), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
-    refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
-    if fit.overlap_crop and not whole:  # again on the overlap where ICP put the scan
-        T = refined[0]
-        cropped = cropped_at(T)
-        if cropped is not source:  # the result, information included, of the registration on the overlap
-            refined = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
-    return refined
 
 
 def _add(*timings: dict) -> dict:

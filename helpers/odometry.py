@@ -218,7 +218,11 @@ def staleness(blind: list[bool], window: int = 3) -> int:
     on ground too flat to move it: a lake, with no fit). Over a lake the drone
     may begin a turn nobody sees; the first step measured after it turns away
     from the guess by as much as the turn grew meanwhile."""
-    in_a_row = len(blind) - next((k + 1 for k in range(len(blind) - 1, -1, -1) if not blind[k]), 0)
+    in_a_row = 0
+    for was_blind in reversed(blind):  # the run of blind steps that ends the list
+        if not was_blind:
+            break
+        in_a_row += 1
     return max(in_a_row, int(sum(blind[-window:])))
 
 

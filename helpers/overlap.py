@@ -34,10 +34,17 @@ edge does; ``benchmarks/bench_bias.py``).
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from .config import RegistrationConfig
 from .icp import IcpCloud, icp_cloud
+from .icp_service import IcpService
+
+if TYPE_CHECKING:
+    from .frames import Frame
 
 MIN_KEPT = 30  # points: a crop that keeps fewer leaves ICP too little to fit six degrees of freedom; keep all then
 
@@ -90,3 +97,41 @@ def cropped_cloud(moving: IcpCloud, fixed: np.ndarray, T_fixed_moving: np.ndarra
     if points is moving.points:
         return moving
     return icp_cloud(points, moving.metric, moving.backend)
+
+
+def overlap_icp(
+    moving: Frame,
+    fixed: Frame,
+    T_fixed_moving: np.ndarray,
+    fit: RegistrationConfig,
+    icp=None,
+    crop_at=None,
+    whole=False,
+):
+    """ICP between the prepared clouds of two :class:`helpers.frames.Frame` (bare points for a frame built by
+    hand): ``(T_fixed_moving, rmse)``, an :class:`helpers.icp.IcpResult` with its information.
+
+    With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a
+    first ICP on the whole scan put it, and registered again; given ``crop_at`` (4 x 4: the last motion,
+    within a few decimetres on a steady flight), it is cropped there and registered once: the crop's
+    margin is the inlier distance, metres. ``whole``: the whole scan, registered once."""
+    wanted = (fit.metric, fit.icp_backend)
+    source = moving.icp if moving.icp and (moving.icp.metric, moving.icp.backend) == wanted else moving.icp_points
+    target = fixed.icp if fixed.icp and (fixed.icp.metric, fixed.icp.backend) == wanted else fixed.icp_points
+    icp = icp or IcpService.from_config(fit)
+    cap = fit.icp_max_iterations
+
+    def cropped_at(T):  # the moving points the fixed scan also saw, at T
+        if isinstance(source, IcpCloud):
+            return cropped_cloud(source, fixed.icp_points, T, fit.inlier_distance)
+        return crop(source, fixed.icp_points, T, fit.inlier_distance)
+
+    if fit.overlap_crop and crop_at is not None:
+        return icp.align(moving=cropped_at(crop_at), fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
+    refined = icp.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=cap)
+    if fit.overlap_crop and not whole:  # again on the overlap where ICP put the scan
+        T = refined[0]
+        cropped = cropped_at(T)
+        if cropped is not source:  # the result, information included, of the registration on the overlap
+            refined = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
+    return refined

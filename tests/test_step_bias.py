@@ -111,8 +111,8 @@ def test_icp_with_the_crop_recovers_a_turned_step(yaw_deg):
 def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
     """Tracking's start is close: ICP crops the moving strip at it and registers once, where a start from the
     robust fit is registered whole, cropped where that put it, and registered again. Both end on the truth."""
-    from helpers.frames import _icp
     from helpers.icp_service import IcpService
+    from helpers.overlap import overlap_icp
 
     config = STRIPS
     moving_points, fixed_points, T_true = turned_strips(10.0)
@@ -125,7 +125,7 @@ def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
     start = yawed(11.0, (6.3, 2.0, 0.0))
     for crop_at, registrations in ((start, 1), (None, 2)):
         clouds.clear()
-        T, _ = _icp(moving, fixed, start, config.registration, crop_at=crop_at)
+        T, _ = overlap_icp(moving, fixed, start, config.registration, crop_at=crop_at)
         assert len(clouds) == registrations and clouds[-1] < len(moving.icp_points)  # the last one on the overlap
         assert np.linalg.norm(T[:3, 3] - T_true[:3, 3]) < 0.05
         np.testing.assert_allclose(T[:3, :3], T_true[:3, :3], atol=2e-3)
