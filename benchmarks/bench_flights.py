@@ -15,9 +15,10 @@ its own, and graded against the simulator's poses:
 
 ``--swing S`` spaces the waypoints so that the speed swings by +-S along the
 flight (one period a lap); ``--set table.key=value`` overrides a configuration
-value after fitting (repeatable). The table prints ATE (odometry -> optimised),
-the one-step RPE, the mean ratio of estimated to true step length, loops (false),
-whether the run calls itself trusted, and the first words of each problem named.
+value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted value).
+The table prints ATE (odometry -> optimised), the one-step RPE, the mean ratio of
+estimated to true step length, loops (false), whether the run calls itself
+trusted, and the first words of each problem named.
 """
 
 from __future__ import annotations
@@ -106,11 +107,15 @@ def build_flight(options: dict):
 
 
 def with_settings(config, assignments):
-    """``config`` with each ``table.key=value`` of ``assignments`` set (numbers and true/false read as such)."""
+    """``config`` with each ``table.key=value`` of ``assignments`` set (numbers and true/false read as such);
+    ``table.key*=factor`` multiplies the value ``config`` has."""
     for assignment in assignments:
         key, value = assignment.split("=", 1)
-        table, name = key.split(".")
-        config = config.with_values(**{table: {name: _value(value)}})
+        table, name = key.rstrip("*").split(".")
+        value = _value(value)
+        if key.endswith("*"):
+            value = value * getattr(getattr(config, table), name)
+        config = config.with_values(**{table: {name: value}})
     return config
 
 
@@ -164,7 +169,13 @@ def main() -> None:
     parser.add_argument("--flights", nargs="+", default=list(FLIGHTS))
     parser.add_argument("--laps", type=float, default=2.0, help="laps of the fitted loop on tiles (default 2)")
     parser.add_argument("--swing", type=float, default=0.0, help="speed swing, e.g. 0.3 for +-30 %%")
-    parser.add_argument("--set", action="append", default=[], metavar="TABLE.KEY=VALUE")
+    parser.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="TABLE.KEY=VALUE",
+        help="after the fit; TABLE.KEY*=FACTOR multiplies the fitted value",
+    )
     parser.add_argument("--map-error", action="store_true", help="also the median map error (slower)")
     args = parser.parse_args()
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}

@@ -7,10 +7,12 @@ Every system registers the default flight's accepted scans (every
 first true pose; the ATE is taken against the true poses of those scans.
 
 - ours, global: the reference's workflow (FPFH, matching, robust fit, ICP) for every scan, with our
-  yaw-and-translation robust fit (``robust_fit = "msac4"``, the default);
-- ours, global, rigid fit: the same with the reference's rigid fit (``robust_fit = "msac"``);
-- ours, global, keypoints 0.5: describing and matching the more tilted half of each scan;
-- ours, global, 2 m / 40 and 3 m / 30: a coarser descriptor grid and fewer neighbours (issue 22's levers);
+  yaw-and-translation robust fit (``robust_fit = "msac4"``, the default) and the descriptor grid that
+  ``python -m helpers run`` fits to this flight (3 m, twice the reference's: ``helpers.fitting``);
+- ours, global, 1.5 m grid: the same on the reference's descriptor grid (``Config()``, the notebooks');
+- ours, global, rigid fit: the same with the reference's rigid fit (``robust_fit = "msac"``) and grid;
+- ours, global, keypoints 0.5: describing and matching the more tilted half of each scan (1.5 m grid);
+- ours, global, 2 m / 40 and 3 m / 30: other descriptor grids and fewer neighbours (issue 22's levers);
 - ours, tracking: ICP from the last motion, the global workflow when a check fails;
 - Open3D's recipe: its global-registration tutorial on 1.5 m voxels (FPFH,
   RANSAC on feature matches), refined by its generalized ICP;
@@ -47,6 +49,7 @@ import numpy as np
 
 import helpers
 from helpers.config import Config
+from helpers.fitting import DESCRIPTOR_GRID_FACTOR
 from helpers.frames import prepare as prepare_frame
 from helpers.icp import refine_icp
 from helpers.metrics import ate
@@ -133,7 +136,8 @@ def kiss_icp_odometry(scans, first_pose):
 
 
 PEERS = {
-    "ours, global": (ours("global"), None),
+    "ours, global": (ours("global", {"grid_step": DESCRIPTOR_GRID_FACTOR * Config().features.grid_step}), None),
+    "ours, global, 1.5 m grid": (ours("global"), None),
     "ours, global, rigid fit": (ours("global", registration={"robust_fit": "msac"}), None),
     "ours, global, keypoints 0.5": (ours("global", {"keypoint_share": 0.5}), None),
     "ours, global, 2 m / 40": (ours("global", {"grid_step": 2.0, "neighbors": 40}), None),

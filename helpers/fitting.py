@@ -8,7 +8,8 @@ in disguise, so on a flight ``k`` times as high they are scaled by ``k``,
 never finer than the surface the rays hit (a 1 m height field shows nothing
 finer); counts that stand for distances (``skip_frames``, ``sub_map_thresh``)
 are recomputed from the waypoint spacing. On the reference's own flight every
-value comes out as the reference's.
+value comes out as the reference's but one: the descriptor grid
+(:data:`DESCRIPTOR_GRID_FACTOR`), which the fit doubles for speed.
 
 What is not scaled, and why: the loop search radius and the RMSE
 thresholds (of loops and of edges back) measure drift and surface noise, not
@@ -47,6 +48,14 @@ GRID_ROUNDING = 0.05  # m: fitted grid steps are multiples of this
 # Five cells leave the reference's values room on flights four times lower than its own (150 m: a 13 m strip).
 GRID_CELLS_ACROSS = 5
 GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("map", "align_grid_step"))
+# The scans are described and matched on a grid this many times the footprint's scaled step (ours; the
+# reference describes on the same grid as the rest). The matcher compares every moving descriptor with every
+# fixed one, so its time grows with the square of their number, and FPFH's with their number: on the default
+# flight a 3 m grid keeps 2,800 of 5,800 points, and the reference's workflow takes 82 ms a scan against 192
+# (benchmarks/bench_flights.py, README). ICP, the map and every distance still follow the footprint's step,
+# and the floor is the surface's cell as for every grid, so low flights, whose grid is already held there,
+# keep it (coarser descriptors lost them: Autzen at 150 m and the sparse tile, README).
+DESCRIPTOR_GRID_FACTOR = 2.0
 # Where every scan is accepted (skip_frames 1: a flight under half the reference's height at its spacing), the
 # scans' ray rows lie about one ICP cell apart, and scan-to-scan ICP over ground with little relief pulls one
 # scan's rows onto the last one's: steps come out short and turns too small (4 % short at 250 m above Autzen,
@@ -126,8 +135,9 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         return round(max(1, round(value / GRID_ROUNDING)) * GRID_ROUNDING, 6)
 
     skip = max(1, round(ref_fit.skip_frames * k / along))
-    grid_step = grid(max(ref_features.grid_step * k, flight.surface_cell))
-    scale = grid_step / ref_features.grid_step  # distances that follow the grid
+    footprint_step = grid(max(ref_features.grid_step * k, flight.surface_cell))
+    scale = footprint_step / ref_features.grid_step  # distances that follow the grid
+    grid_step = grid(max(DESCRIPTOR_GRID_FACTOR * ref_features.grid_step * k, flight.surface_cell))
     per_submap = config.map.n_scans_per_submap * skip * flight.spacing  # m flown per submap
     sub_map_thresh = max(1, round(REFERENCE_LOOP_AGE * k / per_submap))
     wanted = {
@@ -138,13 +148,20 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         ),
         ("features", "grid_step"): (
             grid_step,
-            f"{k:.2f} x the reference's {ref_features.grid_step} m for a flight {flight.height:.0f} m above the "
-            f"ground, not finer than the {flight.surface_cell:g} m surface",
+            f"{DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's {ref_features.grid_step} m for a flight "
+            f"{flight.height:.0f} m above the ground (twice the footprint's step: the descriptors are matched "
+            f"every one with every one), not finer than the {flight.surface_cell:g} m surface",
         ),
-        ("registration", "icp_grid_step"): (grid(ref_fit.icp_grid_step * scale), "half the grid step"),
-        ("map", "align_grid_step"): (grid(TUNED_AT.map.align_grid_step * scale), "0.8 x the grid step"),
-        ("registration", "max_distance"): (round(ref_fit.max_distance * scale, 2), "follows the grid step"),
-        ("registration", "inlier_distance"): (round(ref_fit.inlier_distance * scale, 2), "2 x the grid step"),
+        ("registration", "icp_grid_step"): (
+            grid(ref_fit.icp_grid_step * scale),
+            f"half the footprint's step, {footprint_step:g} m",
+        ),
+        ("map", "align_grid_step"): (grid(TUNED_AT.map.align_grid_step * scale), "0.8 x the footprint's step"),
+        ("registration", "max_distance"): (round(ref_fit.max_distance * scale, 2), "follows the footprint's step"),
+        ("registration", "inlier_distance"): (
+            round(ref_fit.inlier_distance * scale, 2),
+            "2 x the footprint's step",
+        ),
         ("loop_closure", "rmse_threshold"): (
             round(max(TUNED_AT.loop_closure.rmse_threshold * k, LOOP_RMSE_NOISES * config.sensor.range_noise), 2),
             f"{k:.2f} x the reference's {TUNED_AT.loop_closure.rmse_threshold} m: a true match's surface RMSE "

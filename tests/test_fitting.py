@@ -6,15 +6,26 @@ import dataclasses
 import pytest
 
 from helpers.config import Config
-from helpers.fitting import REFERENCE_HEIGHT, Flight, fit_to_flight, flight_of
+from helpers.fitting import DESCRIPTOR_GRID_FACTOR, REFERENCE_HEIGHT, Flight, fit_to_flight, flight_of
 
 
-def test_the_reference_flight_gets_the_reference_values(default_dataset):
+def test_the_reference_flight_gets_the_reference_values_but_a_coarser_descriptor_grid(default_dataset):
     flight = flight_of(default_dataset)
     assert flight.height == pytest.approx(REFERENCE_HEIGHT, abs=1.0) and flight.spacing == pytest.approx(2.0)
     fitted, reasons = fit_to_flight(flight, Config())
-    assert fitted == Config()
+    assert fitted.features.grid_step == DESCRIPTOR_GRID_FACTOR * Config().features.grid_step == 3.0
+    assert fitted == Config().with_values(features={"grid_step": 3.0})  # ICP, the map and distances: the reference's
     assert len(reasons) == 8 and all(line.startswith("[") for line in reasons)
+
+
+def test_the_descriptor_grid_doubles_only_above_the_surface_floor():
+    """250 m up (k = 0.41) the footprint's step would be 0.62 m and is held at the 1 m surface, which ICP, the map
+    and the distances follow; the descriptors' doubled step, 1.24 m, lies above the floor and is kept."""
+    middle = Flight(height=250.0, spacing=2.0, surface_cell=1.0, strip=22.0)
+    fitted, _ = fit_to_flight(middle, Config())
+    assert fitted.features.grid_step == 1.25
+    assert fitted.registration.icp_grid_step == 0.5 and fitted.map.align_grid_step == 0.8
+    assert fitted.registration.inlier_distance == 2.0 and fitted.registration.max_distance == pytest.approx(0.67)
 
 
 def test_a_low_flight_gets_the_footprint_lengths():
@@ -44,7 +55,8 @@ def test_a_high_flight_with_sparse_waypoints():
     high = Flight(height=2 * REFERENCE_HEIGHT, spacing=4.0, surface_cell=1.0, strip=105.0)
     fitted, _ = fit_to_flight(high, Config())
     assert fitted.registration.skip_frames == 3  # twice the strip, waypoints twice as far apart
-    assert fitted.features.grid_step == 3.0 and fitted.registration.inlier_distance == 6.0
+    assert fitted.features.grid_step == 6.0  # twice the footprint's 3 m step, which the distances follow
+    assert fitted.registration.icp_grid_step == 1.5 and fitted.registration.inlier_distance == 6.0
     assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
     assert fitted.registration.icp_local_map == 1 and fitted.pose_graph.edges_back == Config().pose_graph.edges_back
     assert fitted.loop_closure.rmse_threshold == 1.2  # rows twice as far apart: a true match scores twice as much
