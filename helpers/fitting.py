@@ -148,9 +148,16 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         ),
         ("features", "grid_step"): (
             grid_step,
-            f"{DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's {ref_features.grid_step} m for a flight "
-            f"{flight.height:.0f} m above the ground (twice the footprint's step: the descriptors are matched "
-            f"every one with every one), not finer than the {flight.surface_cell:g} m surface",
+            (
+                f"{DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's {ref_features.grid_step} m for a flight "
+                f"{flight.height:.0f} m above the ground (twice the scaled step: the matcher compares every "
+                "descriptor with every one)"
+            )
+            if grid_step > flight.surface_cell
+            else (
+                f"the {flight.surface_cell:g} m surface ({DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's "
+                f"{ref_features.grid_step} m for a flight {flight.height:.0f} m above the ground would be finer)"
+            ),
         ),
         ("registration", "icp_grid_step"): (
             grid(ref_fit.icp_grid_step * scale),
