@@ -51,10 +51,10 @@ GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("ma
 # The scans are described and matched on a grid this many times the footprint's scaled step (ours; the
 # reference describes on the same grid as the rest). The matcher compares every moving descriptor with every
 # fixed one, so its time grows with the square of their number, and FPFH's with their number: on the default
-# flight a 3 m grid keeps 2,800 of 5,800 points, and the reference's workflow takes 82 ms a scan against 192
-# (benchmarks/bench_flights.py, README). ICP, the map and every distance still follow the footprint's step,
-# and the floor is the surface's cell as for every grid, so low flights, whose grid is already held there,
-# keep it (coarser descriptors lost them: Autzen at 150 m and the sparse tile, README).
+# flight a 3 m grid keeps 2,800 of 5,800 points, and FPFH and matching take 41-42 ms a scan against 115-124 (a
+# default run's stages, paired; README, "Measured figures"). ICP, the map and every distance still follow the
+# footprint's step, and the floor is the surface's cell as for every grid, so low flights, whose grid is
+# already held there, keep it (coarser descriptors lost them: Autzen at 150 m and the sparse tile, README).
 DESCRIPTOR_GRID_FACTOR = 2.0
 # Where every scan is accepted (skip_frames 1: a flight under half the reference's height at its spacing), the
 # scans' ray rows lie about one ICP cell apart, and scan-to-scan ICP over ground with little relief pulls one
