@@ -138,6 +138,10 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
     footprint_step = grid(max(ref_features.grid_step * k, flight.surface_cell))
     scale = footprint_step / ref_features.grid_step  # distances that follow the grid
     grid_step = grid(max(DESCRIPTOR_GRID_FACTOR * ref_features.grid_step * k, flight.surface_cell))
+    doubled = (
+        f"{DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's {ref_features.grid_step} m for a flight "
+        f"{flight.height:.0f} m above the ground"
+    )
     per_submap = config.map.n_scans_per_submap * skip * flight.spacing  # m flown per submap
     sub_map_thresh = max(1, round(REFERENCE_LOOP_AGE * k / per_submap))
     wanted = {
@@ -148,16 +152,9 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         ),
         ("features", "grid_step"): (
             grid_step,
-            (
-                f"{DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's {ref_features.grid_step} m for a flight "
-                f"{flight.height:.0f} m above the ground (twice the scaled step: the matcher compares every "
-                "descriptor with every one)"
-            )
+            f"{doubled} (twice the scaled step: the matcher compares every descriptor with every one)"
             if grid_step > flight.surface_cell
-            else (
-                f"the {flight.surface_cell:g} m surface ({DESCRIPTOR_GRID_FACTOR:g} x {k:.2f} x the reference's "
-                f"{ref_features.grid_step} m for a flight {flight.height:.0f} m above the ground would be finer)"
-            ),
+            else f"the {flight.surface_cell:g} m surface ({doubled} would be finer)",
         ),
         ("registration", "icp_grid_step"): (
             grid(ref_fit.icp_grid_step * scale),

@@ -196,9 +196,10 @@ def loop_correction(result) -> float:
 
 
 def loop_pull(result, suspects) -> float:
-    """How far (m) the loop edges ``suspects`` still move any pose: the run's graph (rebuilt as
-    :func:`loop_correction` rebuilds it) against the same graph without them. A false loop that a robust
-    kernel set aside pulls by millimetres to centimetres; one it could not, or with no kernel, by metres."""
+    """How far (m) the loop edges ``suspects`` still move any pose: the run's graph against the same graph
+    without them, both rebuilt from the run's edges (the run's own graph may hold GNSS fixes, whose pull is
+    not the suspects'). A false loop that a robust kernel set aside pulls by millimetres to centimetres; one
+    it could not, or with no kernel, by metres."""
     if not suspects:
         return 0.0
     kept = [loop for loop in result.loops if not any(loop is suspect for suspect in suspects)]

@@ -1,5 +1,6 @@
 """Odometry over a short stretch of the default flight, including a turn."""
 
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -300,18 +301,23 @@ def test_after_a_blind_step_the_guess_is_the_last_step_and_its_age_is_counted():
     assert staleness([False] + [True] * 5) == 5
 
 
+def _benchmark_flight(name: str, swing: float):
+    """(lazy dataset, fitted config) of ``benchmarks/bench_flights.py``'s flight ``name``, two laps."""
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
+    from bench_flights import build_flight
+
+    return build_flight({"name": name, "laps": 2, "swing": swing, "set": [], "map_error": False})
+
+
 def test_a_turn_begun_over_water_is_followed(autzen):
     """250 m above Autzen with the speed swinging by 30 %, the drone enters a 6-degree-a-step turn over the
     river (scans 64-69: flat, sparse ground, no fit explains the matches). Before the odometry knew which steps
     measured nothing, it kept the straight motion through the turn and then doubted the first fit that saw it
     (its turn was 6 degrees from the stale guess): 5 degrees lost a step, 23 in all. Every step must stay
     within a degree of the truth."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from bench_flights import build_flight
-
-    data, config = build_flight({"name": "autzen-250", "laps": 2, "swing": 0.3, "set": [], "map_error": False})
+    data, config = _benchmark_flight("autzen-250", swing=0.3)
     assert config.registration.skip_frames == 1 and config.registration.motion_guard
     scans = range(58, 77)
     result = run_odometry([data.scans[k] for k in scans], data.poses[58], config)
@@ -328,14 +334,9 @@ def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan():
     overlap slides 2.9 m along the track, from the fit and from the true last motion alike (constraint 0.0065,
     just above the weak bar): the crop leaves a strip too short to pin it. A drone does not jump: ICP on the
     whole scan from the last motion lands within the jump limits of it and is kept."""
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-    from bench_flights import build_flight
-
     from helpers.frames import describe
 
-    data, config = build_flight({"name": "sparse-150", "laps": 2, "swing": 0.3, "set": [], "map_error": False})
+    data, config = _benchmark_flight("sparse-150", swing=0.3)
     assert config.registration.overlap_crop and config.registration.motion_guard
     fixed, moving = (describe(prepare(data.scans[k], config), config) for k in (88, 89))
     truth = np.linalg.inv(data.poses[88]) @ data.poses[89]
