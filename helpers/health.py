@@ -189,10 +189,12 @@ def weak_sigmas(odometry) -> np.ndarray:
 
 
 def loop_correction(result) -> float:
-    """How far (m) the loop edges moved any pose: the optimised graph against the same graph without them."""
+    """How far (m) the loop edges moved any pose: the run's graph against the same graph without them, both
+    rebuilt from the run's edges (as :func:`loop_pull`: GNSS fixes in the run's own graph move it too, and
+    that is not the loops' doing)."""
     if not result.loops:
         return 0.0
-    return _moved(result.graph.poses, _optimized(result, []))
+    return _moved(_optimized(result, result.loops), _optimized(result, []))
 
 
 def loop_pull(result, suspects) -> float:

@@ -7,6 +7,7 @@ import numpy as np
 
 from helpers.config import Config
 from helpers.factors import Edge
+from helpers.gnss import GnssFixes
 from helpers.health import CORRECTION_FLOOR_M, FALSE_LOOP_SIGMAS, WEAK_SIGMA_M, assess, loop_residuals
 from helpers.information import calibrated
 from helpers.odometry import OdometryResult
@@ -28,8 +29,9 @@ def _at(x, y=0.0):
     return T
 
 
-def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config=CONFIG):
-    """A run of NODES nodes ``step`` m apart along x, optimised with the given edges (a SlamResult's fields)."""
+def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config=CONFIG, fixes=()):
+    """A run of NODES nodes ``step`` m apart along x, optimised with the given edges and GNSS ``fixes``
+    (factors, as the run adds them; the result's fields as a SlamResult's)."""
     informations = [_info(0.05)] * (NODES - 1) if informations is None else informations
     relative = np.array([_at(step)] * (NODES - 1))
     poses = np.array([_at(step * k) for k in range(NODES)])
@@ -45,6 +47,8 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
         information=list(informations),
     )
     graph = build_pose_graph(odometry, list(extra), list(loops), config)
+    for fix in fixes:
+        graph.add_factor(fix)
     optimised = graph.optimize(anchor_pose=poses[0], loop_kernel=config.pose_graph.loop_kernel)
     queries = [SimpleNamespace(closure=loop, submap_ids=[0], best_scan_constraint=0.5) for loop in loops]
     return SimpleNamespace(
@@ -138,4 +142,15 @@ def test_a_hovering_flight_has_its_loop_corrections_judged_in_metres():
 def test_the_loop_correction_is_what_the_loops_moved():
     """A loop that agrees with the odometry moves nothing; the correction counts only the loops' effect."""
     run = _run(loops=[_loop_off_by(0.0, 0.05)])
+    assert assess(run).counts["largest_correction_m"] < 0.01
+
+
+def test_gnss_fixes_moving_the_trajectory_are_no_loop_correction():
+    """A loop that agrees with the odometry, and GNSS fixes 3 m to the side of every node (a biased
+    receiver): the fixes swing the trajectory about its anchored first node by metres, the loop still
+    moves it by nothing."""
+    positions = np.array([[2.0 * k, 3.0, 0.0] for k in range(NODES)])
+    fixes = GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)).factors(np.arange(NODES) * 3)
+    run = _run(loops=[_loop_off_by(0.0, 0.05)], fixes=fixes)
+    assert run.graph.poses[-1, 1, 3] > 1.0  # the fixes did move it
     assert assess(run).counts["largest_correction_m"] < 0.01
