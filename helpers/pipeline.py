@@ -17,6 +17,7 @@ from . import paths
 from .config import Config, noise_seed_from_environment
 from .configfile import config_to_toml
 from .dataset import Dataset, create_dataset
+from .edges_worker import STARTUP_NODES
 from .factors import Edge
 from .loopclosure import LoopQuery
 from .odometry import OdometryResult
@@ -42,8 +43,14 @@ def run_slam(
     other true pose is read: :mod:`helpers.evaluation` grades the result).
     ``odometry``: reuse one already computed on this dataset with this
     configuration (the stages after it run as usual). ``gnss``: position
-    fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph."""
-    slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss)
+    fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph.
+    A flight of :data:`~helpers.edges_worker.STARTUP_NODES` nodes or more
+    registers its edges back in a helper process while the next scan is
+    registered (:mod:`helpers.edges_worker`): the same result, sooner."""
+    config = config or Config()
+    nodes = len(odometry.indices) if odometry is not None else -(-len(dataset) // config.registration.skip_frames)
+    background = nodes >= STARTUP_NODES
+    slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss, background=background)
     bar = progress_bar(len(dataset), "slam", enabled=progress)
     loops = 0
     for index in range(len(dataset)):

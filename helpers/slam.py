@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import Config
+from .edges_worker import BackgroundEdges
 from .errors import SlamError
 from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
@@ -116,11 +117,22 @@ class EdgesBack:
         self.edges: list[Edge] = []
         self.tried = 0
 
+    @classmethod
+    def from_config(cls, icp: IcpService, graph) -> EdgesBack:
+        """The edges back of ``[pose_graph]`` (``graph``), registered by ``icp``."""
+        return cls(
+            icp,
+            edges_back=graph.edges_back,
+            max_iterations=graph.edges_back_icp_max_iterations,
+            rmse_threshold=graph.edges_back_rmse_threshold,
+        )
+
     def add(self, j: int, clouds, relative) -> list[Edge]:
-        """The edges back of node ``j`` (``clouds`` of nodes 0 .. j, ``relative`` the odometry steps)."""
+        """The edges back of node ``j`` (``clouds[k]``: node k's cloud, ``relative[k]``: the odometry
+        step from node k to k + 1; lists, or dicts of the nodes within reach)."""
         kept = []
         for back in range(2, min(self.edges_back, j) + 1):
-            guess = np.linalg.multi_dot([np.eye(4), *relative[j - back : j]])
+            guess = np.linalg.multi_dot([np.eye(4), *(relative[k] for k in range(j - back, j))])
             fit = self.icp(
                 moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
             )
@@ -145,10 +157,18 @@ class Slam:
     these scans with this configuration; the run then reuses its poses and
     registers nothing scan to scan (a back end for tests and notebooks).
     ``gnss``: position fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph.
+    ``background``: register the edges back in a helper process, one node behind
+    (:mod:`helpers.edges_worker`: the same edges, sooner); a :class:`Step` then
+    carries the edges back of the node before it.
     """
 
     def __init__(
-        self, config: Config | None = None, anchor=None, odometry: OdometryResult | None = None, gnss=None
+        self,
+        config: Config | None = None,
+        anchor=None,
+        odometry: OdometryResult | None = None,
+        gnss=None,
+        background: bool = False,
     ) -> None:
         self.config = config = config or Config()
         anchor = np.eye(4) if anchor is None else anchor
@@ -157,13 +177,9 @@ class Slam:
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given, self.gnss = odometry, gnss
         self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph)
-        graph = config.pose_graph
-        self.edges_back = EdgesBack(
-            self.icp,
-            edges_back=graph.edges_back,
-            max_iterations=graph.edges_back_icp_max_iterations,
-            rmse_threshold=graph.edges_back_rmse_threshold,
-        )
+        self.edges_back = EdgesBack.from_config(self.icp, config.pose_graph)
+        if background and config.pose_graph.edges_back > 1:
+            self.edges_back = BackgroundEdges(self.edges_back, config)
         self.clouds: list[np.ndarray] = []
         self.indices: list[int] = []
         self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)
@@ -198,14 +214,23 @@ class Slam:
         self.clouds.append(cloud)
         self.indices.append(int(index))
         self.runtime["odometry"] += time.perf_counter() - start
+        background = isinstance(self.edges_back, BackgroundEdges)
+        if background:  # the node before's edges back, computed meanwhile, join the graph where step 3 adds them
+            start = time.perf_counter()
+            edges = self.edges_back.collect()
+            self.loops.add_edges(edges)
+            self.runtime["edges_back"] += time.perf_counter() - start
         # 2. Submap and loop query, on the odometry poses.
         start = time.perf_counter()
         query = self.loops.add(node, cloud, poses[node], self.clouds, poses, information)
         self.runtime["submaps_and_loop_closure"] += time.perf_counter() - start
         # 3. Edges back, from the chained odometry.
         start = time.perf_counter()
-        edges = self.edges_back.add(node, self.clouds, relative)
-        self.loops.add_edges(edges)  # the loop search's uncertainty graph
+        if background:
+            self.edges_back.submit(node, self.clouds, relative)
+        else:
+            edges = self.edges_back.add(node, self.clouds, relative)
+            self.loops.add_edges(edges)  # the loop search's uncertainty graph
         self.runtime["edges_back"] += time.perf_counter() - start
         return Step(index, True, node, poses[node], fallback, query, tuple(edges))
 
@@ -214,6 +239,11 @@ class Slam:
         ``n_scans``: the flight's scans, accepted or not (by default up to the last one processed)."""
         if len(self.indices) < 2:
             raise SlamError(f"SLAM needs at least 2 accepted scans, got {len(self.indices)}")
+        if isinstance(self.edges_back, BackgroundEdges):  # the last node's edges back, then the process stops
+            start = time.perf_counter()
+            self.loops.add_edges(self.edges_back.collect())
+            self.edges_back.close()
+            self.runtime["edges_back"] += time.perf_counter() - start
         config, runtime = self.config, dict(self.runtime)
         odometry = self.given if self.given is not None else self.odometry.result()
         # 4. Pose graph: odometry edges, edges to older scans, loop edges, the first node anchored.

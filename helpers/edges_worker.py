@@ -1,0 +1,153 @@
+"""The edges back in a helper process, one node behind the main loop.
+
+The edges back are a third of a run's time (the default flight's 680 ICPs,
+one thread each: small_gicp holds Python's lock, so a thread would not
+help) and nothing in a node's odometry waits for them: only the next loop
+query reads them, through the loop closer's uncertainty graph. So while the
+main process registers node j + 1, this process registers node j onto the
+scans before it, and :class:`BackgroundEdges` hands node j's edges over just
+before node j + 1's loop query, where :class:`helpers.slam.EdgesBack` in
+the main process would have added them. The same code on the same points
+and steps in the same order gives the same edges to the bit, so a run is
+the same run either way; only the time changes.
+
+The process is a fresh Python running :func:`main`, not a fork of the main
+process (OpenMP does not survive a fork) nor a ``multiprocessing`` spawn
+(which re-runs a user's script that has no ``__main__`` guard). It reads
+pickled messages on its stdin and answers on what was its stdout (the
+libraries' own prints go to stderr instead). If it cannot start or dies,
+the main process warns once and registers the edges back itself.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import subprocess
+import sys
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+STARTUP_NODES = 50  # a run of fewer nodes registers in place: starting the process (imports) costs about a second
+
+
+class BackgroundEdges:
+    """:class:`helpers.slam.EdgesBack` (``local``) run in a helper process: :meth:`submit` node j's scan
+    and steps, :meth:`collect` its kept edges at the next node. ``edges``, ``tried`` and :meth:`sorted`
+    are ``local``'s, which also registers any node the process could not."""
+
+    def __init__(self, local, config) -> None:
+        self.local, self.pending, self.process = local, None, None
+        package_parent = str(Path(__file__).resolve().parent.parent)  # the helpers the main process imported
+        path = os.pathsep.join(filter(None, (package_parent, os.environ.get("PYTHONPATH"))))
+        # one thread: the main process keeps the others busy (a k-d tree or a covariance is the same on any number)
+        env = {**os.environ, "PYTHONPATH": path, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+        try:
+            command = [sys.executable, "-c", "from helpers.edges_worker import main; main()"]
+            self.process = subprocess.Popen(command, stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+            self._send(("start", config))
+        except OSError as exc:
+            self._give_up(exc)
+
+    def submit(self, j: int, clouds, relative) -> None:
+        """Start node ``j``'s edges back (``clouds`` of nodes 0 .. j, ``relative`` the odometry steps)."""
+        self.pending = (j, clouds, relative)
+        if self.process is not None:
+            steps = {k: relative[k] for k in range(max(0, j - self.local.edges_back), j)}
+            try:
+                self._send(("node", j, clouds[j], steps))
+            except OSError as exc:
+                self._give_up(exc)
+
+    def collect(self) -> list:
+        """The kept edges back of the node last submitted ([] if none is pending)."""
+        if self.pending is None:
+            return []
+        (j, clouds, relative), self.pending = self.pending, None
+        if self.process is not None:
+            try:
+                kind, value, tried = pickle.load(self.process.stdout)
+            except (OSError, EOFError, pickle.UnpicklingError) as exc:
+                self._give_up(exc)
+            else:
+                if kind == "error":
+                    raise value  # what the main process would have raised for this node
+                self.local.edges.extend(value)
+                self.local.tried += tried
+                return value
+        return self.local.add(j, clouds, relative)
+
+    def sorted(self) -> list:
+        return self.local.sorted()
+
+    @property
+    def tried(self) -> int:
+        return self.local.tried
+
+    def close(self) -> None:
+        """Stop the process (a run's result has every edge); idempotent."""
+        if self.process is not None:
+            process, self.process = self.process, None
+            for pipe in (process.stdin, process.stdout):
+                pipe.close()
+            try:
+                process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+    def _send(self, message) -> None:
+        pickle.dump(message, self.process.stdin, protocol=pickle.HIGHEST_PROTOCOL)
+        self.process.stdin.flush()
+
+    def _give_up(self, exc) -> None:
+        log.warning("the edges back's helper process failed (%s): registering them in this process", exc)
+        process, self.process = self.process, None
+        if process is not None:
+            process.kill()
+            process.wait()
+
+    def __del__(self):
+        self.close()
+
+
+def serve(requests, answers) -> None:
+    """Answer ``("node", j, cloud, steps)`` requests with ``("edges", kept, tried)`` (or ``("error", exception,
+    0)``) until the main process closes the pipe; ``("start", config)`` comes first."""
+    from .icp_service import IcpService
+    from .slam import EdgesBack
+
+    clouds, steps, edges = {}, {}, None
+    while True:
+        try:
+            message = pickle.load(requests)
+        except EOFError:
+            return
+        if message[0] == "start":
+            config = message[1]
+            icp = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
+            edges = EdgesBack.from_config(icp, config.pose_graph)
+            continue
+        _, j, cloud, new_steps = message
+        clouds[j] = cloud
+        steps.update(new_steps)
+        for table in (clouds, steps):  # keep what the next node's edges back can reach
+            for old in [k for k in table if k < j - edges.edges_back]:
+                del table[old]
+        tried = edges.tried
+        try:
+            answer = ("edges", edges.add(j, clouds, steps), edges.tried - tried)
+        except Exception as exc:  # the main process raises it, as it would have raised it itself
+            answer = ("error", exc, 0)
+        pickle.dump(answer, answers, protocol=pickle.HIGHEST_PROTOCOL)
+        answers.flush()
+
+
+def main() -> None:
+    """The helper process: answers on a copy of stdout, which then points at stderr."""
+    answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
+    os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # a library's print must not land in the answers
+    sys.stdout = sys.stderr
+    serve(sys.stdin.buffer, answers)
