@@ -216,6 +216,10 @@ class LoopClosureConfig(BoundedTable):
     skip_after_loop: int = param(
         3, "no query for this many accepted scans after a loop edge closed on the same place (0: the reference)"
     )
+    skip_after_closed_place: int = param(
+        12,
+        "skip_after_loop where an earlier pass had closed the place already (0: skip_after_loop's, the reference)",
+    )
     max_attempts: int = param(3, "submaps registered at most per query, nearest first")
     max_returned: int = param(3, "matching submaps kept at most, best first")
     icp_max_iterations: int = param(50, "most ICP iterations when checking a submap or a loop edge")
@@ -235,6 +239,7 @@ class LoopClosureConfig(BoundedTable):
         self._one_of("search", LOOP_SEARCHES)
         self._between("search_sigmas", 0.0, MAX_SIGMAS, "zero or a positive number of sigmas")
         self._within("skip_after_loop", 0, MAX_SCANS)
+        self._within("skip_after_closed_place", 0, MAX_SCANS)
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
@@ -277,7 +282,13 @@ class Config:
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
     "registration": {"robust_fit": "msac", "icp_grid_step": 0.0, "overlap_crop": False, "motion_guard": False},
-    "loop_closure": {"loop_search_growth": 0.0, "min_constraint": 0.0, "search": "growth", "skip_after_loop": 0},
+    "loop_closure": {
+        "loop_search_growth": 0.0,
+        "min_constraint": 0.0,
+        "search": "growth",
+        "skip_after_loop": 0,
+        "skip_after_closed_place": 0,
+    },
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }
 STAGE_TABLES = tuple(f.name for f in dataclasses.fields(Config))  # TOML tables, in workflow order

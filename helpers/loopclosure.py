@@ -183,6 +183,8 @@ class LoopCloser:
                 submaps.n_scans_per_submap,
                 centres=centres[: eligible_submaps(len(submaps), settings)],
                 radius=settings.loop_closure_search_radius + (0.0 if extents is None else extents),
+                window_closed=settings.skip_after_closed_place or None,
+                gap=settings.sub_map_thresh * submaps.n_scans_per_submap,
             ),
         )
         if candidates.closed:

@@ -104,22 +104,39 @@ def reach_of_submaps(
     return radius
 
 
-def closed_places(loops, node: int, window: int, n_scans_per_submap: int, centres=None, radius=0.0) -> set[int]:
+def closed_places(
+    loops, node: int, window: int, n_scans_per_submap: int, centres=None, radius=0.0, window_closed=None, gap=0
+) -> set[int]:
     """The submaps around the old end of every loop edge (``loops``, in the
     order found) closed at most ``window`` accepted scans before ``node``,
     reaching as far along the old track as the drone has flown since: a query
     whose nearest candidate lies there would close the same place again.
+
+    ``window_closed`` (accepted scans; None: ``window``) replaces ``window``
+    for a loop whose old end lies at a place an earlier pass had closed
+    already: a loop edge found more than ``gap`` scans before it has an end
+    within one submap's scans of its old end (a loop found less than ``gap``
+    scans before it is of the same pass: its old end moves with the drone). The third and later passes over a
+    place then query less often than the first revisit, which has only the
+    odometry to correct.
 
     Given the submaps' ``centres`` ((S, 3), m), a place is ground, not one
     pass over it: every submap whose centre lies within ``radius`` (m; one
     number, or one per submap: its reach) of one of those is closed too (on a
     flight over the same ground many times, the nearest candidate is often
     another pass's submap over the place just closed)."""
-    reach = -(-window // n_scans_per_submap) + 1  # submaps flown since, rounded up, and one for the place itself
+    longest = window if window_closed is None else max(window, window_closed)
     closed = set()
-    for loop in reversed(loops):
-        if node - loop.j > window:
+    for k in range(len(loops) - 1, -1, -1):
+        loop = loops[k]
+        if node - loop.j > longest:
             break
+        wait = window
+        if window_closed is not None and _closed_before(loops[:k], loop, gap, n_scans_per_submap):
+            wait = window_closed
+        if node - loop.j > wait:
+            continue
+        reach = _reach(wait, n_scans_per_submap)
         centre = loop.i // n_scans_per_submap
         closed.update(range(centre - reach, centre + reach + 1))
     if centres is not None and closed:
@@ -129,6 +146,19 @@ def closed_places(loops, node: int, window: int, n_scans_per_submap: int, centre
             gap = np.linalg.norm(centres[:, None, :] - centres[None, ids, :], axis=2).min(axis=1)
             closed.update(np.flatnonzero(gap < radius).tolist())
     return closed
+
+
+def _reach(window: int, n_scans_per_submap: int) -> int:
+    """Submaps a closed place reaches either side: those flown during ``window`` scans, rounded up, and one."""
+    return -(-window // n_scans_per_submap) + 1
+
+
+def _closed_before(earlier, loop, gap: int, span: int) -> bool:
+    """Whether a loop of ``earlier`` found more than ``gap`` scans before ``loop`` has an end within ``span``
+    scans of ``loop``'s old end (the same place of an old pass: one submap's scans)."""
+    return any(
+        loop.j - other.j > gap and min(abs(other.i - loop.i), abs(other.j - loop.i)) <= span for other in earlier
+    )
 
 
 def find_loop_candidates(

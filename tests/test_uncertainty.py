@@ -322,6 +322,24 @@ def test_a_closed_place_is_the_ground_not_one_pass_over_it():
     assert closed_places(loops, 124, 3, 5, centres=centres, radius=7.9) == set()  # the window has passed
 
 
+def test_a_place_an_earlier_pass_closed_waits_longer():
+    """Three passes, 5 scans a submap: the second closed scan 17's place at scan 70, the third closes scan 70's
+    at 140. That place was closed before (by the loop found 70 scans earlier, beyond the 45-scan gap), so its
+    wait is window_closed (12 scans, reaching 4 submaps either side) instead of 3; a first closure, or a loop
+    whose earlier neighbour lies within the gap (the same pass), keeps the short wait."""
+    from helpers.loopsearch import closed_places
+
+    third_pass = [Edge(17, 70, np.eye(4)), Edge(70, 140, np.eye(4))]
+    assert closed_places(third_pass, 145, 3, 5, window_closed=12, gap=45) == set(range(10, 19))
+    assert closed_places(third_pass, 145, 3, 5) == set()  # without it the 3-scan wait has passed
+    assert closed_places(third_pass, 153, 3, 5, window_closed=12, gap=45) == set()  # so has the 12-scan one
+    first = [Edge(17, 120, np.eye(4))]
+    assert closed_places(first, 122, 3, 5, window_closed=12, gap=45) == closed_places(first, 122, 3, 5)
+    assert closed_places(first, 125, 3, 5, window_closed=12, gap=45) == set()
+    same_pass = [Edge(17, 120, np.eye(4)), Edge(18, 124, np.eye(4))]
+    assert closed_places(same_pass, 126, 3, 5, window_closed=12, gap=45) == {1, 2, 3, 4, 5}
+
+
 def test_a_loop_search_on_a_window_of_the_graph_closes_the_same_loops():
     # The hairpin's way back with a window of 20 nodes: the first revisit is joined to the scan only the long way
     # round (beyond the window), so it is searched on the whole graph; the loops found are the whole graph's.
