@@ -65,18 +65,20 @@ class BackgroundEdges:
         """The kept edges back of the node last submitted ([] if none is pending)."""
         if self.pending is None:
             return []
-        (j, clouds, relative), self.pending = self.pending, None
+        j, clouds, relative = self.pending
         if self.process is not None:
             try:
                 kind, value, tried = pickle.load(self.process.stdout)
-            except (OSError, EOFError, pickle.UnpicklingError) as exc:
+            except (OSError, EOFError, pickle.UnpicklingError) as exc:  # interrupted reads end here next time
                 self._give_up(exc)
             else:
+                self.pending = None
                 if kind == "error":
                     raise value  # what the main process would have raised for this node
                 self.local.edges.extend(value)
                 self.local.tried += tried
                 return value
+        self.pending = None
         return self.local.add(j, clouds, relative)
 
     def sorted(self) -> list:
@@ -110,7 +112,10 @@ class BackgroundEdges:
             process.wait()
 
     def __del__(self):
-        self.close()
+        try:
+            self.close()
+        except Exception:  # at interpreter exit the modules close() needs may be gone; the process ends on EOF
+            pass
 
 
 def serve(requests, answers) -> None:
@@ -150,4 +155,7 @@ def main() -> None:
     answers = os.fdopen(os.dup(sys.stdout.fileno()), "wb")
     os.dup2(sys.stderr.fileno(), sys.stdout.fileno())  # a library's print must not land in the answers
     sys.stdout = sys.stderr
-    serve(sys.stdin.buffer, answers)
+    try:
+        serve(sys.stdin.buffer, answers)
+    except BrokenPipeError:  # the main process is gone: nobody to answer, nothing to clean up
+        os._exit(0)

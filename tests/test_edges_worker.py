@@ -3,7 +3,9 @@ when the process cannot start or dies halfway, and a failure inside it raised as
 
 import io
 import logging
+import os
 import pickle
+import time
 
 import numpy as np
 import pytest
@@ -100,3 +102,33 @@ def test_a_failure_in_the_helper_process_is_answered_as_the_main_process_would_r
     assert [kind for kind, *_ in replies[:2]] == ["edges", "edges"]  # nodes 0 and 1 have no scan 2 back
     kind, error, tried = replies[2]
     assert kind == "error" and isinstance(error, SlamError) and "points" in str(error) and tried == 0
+
+
+def test_a_run_left_without_its_result_exits_quietly_and_leaves_no_process(tmp_path):
+    """A script that stops before Slam.result(): its helper, answering into a closed pipe, ends without a
+    traceback, and the script's exit status is its own."""
+    import subprocess
+    import sys
+
+    script = (
+        "import helpers, os\n"
+        "from helpers.config import Config\n"
+        "from helpers.slam import Slam\n"
+        "data = helpers.create_dataset()\n"
+        "slam = Slam(Config(), anchor=data.poses[0], background=True)\n"
+        "for i in range(0, 30, 3):\n"
+        "    slam.process(data.scans[i], i)\n"
+        "print(slam.edges_back.process.pid)\n"
+    )
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "Traceback" not in done.stderr and "Exception ignored" not in done.stderr, done.stderr
+    helper = int(done.stdout.split()[-1])
+    for _ in range(50):  # the helper reads the end of its input and stops
+        try:
+            os.kill(helper, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.1)
+    else:
+        pytest.fail(f"the helper process {helper} is still running")
