@@ -13,9 +13,9 @@ pipeline is from that.
 
 Each run is given by its laps and its loop search (``[loop_closure]
 search``, ``skip_after_loop`` and ``skip_after_closed_place``; one run per
-combination). A second table splits each run by lap: the seconds of the whole run and of its loop closure spent
-on each lap's scans (the last lap holds the 120 m past the start), the loops
-found then, and what the loop search's uncertainty cost (ms per accepted
+combination). A second table splits each run by lap: the seconds of the
+whole run and of its loop closure spent on each lap's scans (the last lap
+holds the 120 m past the start), the loops found then, and what the loop search's uncertainty cost (ms per accepted
 scan, ``RelativeUncertainty.seconds``; how often a query needed the whole
 graph rather than its window).
 """

@@ -101,9 +101,10 @@ def assess(result) -> Health:
     flown_to = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     revisits, unclosed = _revisits(result, flown_to)
     flown = float(flown_to[-1])
-    correction = loop_correction(result)
+    rebuilt = _optimized(result, result.loops) if result.loops else None  # both measures start from it
+    correction = loop_correction(result, rebuilt)
     against = loops_against_graph(result)
-    pull = loop_pull(result, against)
+    pull = loop_pull(result, against, rebuilt)
     counts = {
         "n_steps": steps,
         "n_fallbacks": len(fallbacks),
@@ -188,24 +189,26 @@ def weak_sigmas(odometry) -> np.ndarray:
     return np.array([np.nan if info is None else weakest(info)[0] for info in informations], dtype=float)
 
 
-def loop_correction(result) -> float:
+def loop_correction(result, rebuilt=None) -> float:
     """How far (m) the loop edges moved any pose: the run's graph against the same graph without them, both
     rebuilt from the run's edges (as :func:`loop_pull`: GNSS fixes in the run's own graph move it too, and
-    that is not the loops' doing)."""
+    that is not the loops' doing). ``rebuilt``: the run's graph's poses so rebuilt, if already computed."""
     if not result.loops:
         return 0.0
-    return _moved(_optimized(result, result.loops), _optimized(result, []))
+    rebuilt = _optimized(result, result.loops) if rebuilt is None else rebuilt
+    return _moved(rebuilt, _optimized(result, []))
 
 
-def loop_pull(result, suspects) -> float:
+def loop_pull(result, suspects, rebuilt=None) -> float:
     """How far (m) the loop edges ``suspects`` still move any pose: the run's graph against the same graph
     without them, both rebuilt from the run's edges (the run's own graph may hold GNSS fixes, whose pull is
     not the suspects'). A false loop that a robust kernel set aside pulls by millimetres to centimetres; one
-    it could not, or with no kernel, by metres."""
+    it could not, or with no kernel, by metres. ``rebuilt`` as for :func:`loop_correction`."""
     if not suspects:
         return 0.0
     kept = [loop for loop in result.loops if not any(loop is suspect for suspect in suspects)]
-    return _moved(_optimized(result, result.loops), _optimized(result, kept))
+    rebuilt = _optimized(result, result.loops) if rebuilt is None else rebuilt
+    return _moved(rebuilt, _optimized(result, kept))
 
 
 def _optimized(result, loops) -> np.ndarray:

@@ -116,9 +116,9 @@ def closed_places(
     for a loop whose old end lies at a place an earlier pass had closed
     already: a loop edge found more than ``gap`` scans before it has an end
     within one submap's scans of its old end (a loop found less than ``gap``
-    scans before it is of the same pass: its old end moves with the drone). The third and later passes over a
-    place then query less often than the first revisit, which has only the
-    odometry to correct.
+    scans before it is of the same pass: its old end moves with the drone).
+    The third and later passes over a place then query less often than the
+    first revisit, which has only the odometry to correct.
 
     Given the submaps' ``centres`` ((S, 3), m), a place is ground, not one
     pass over it: every submap whose centre lies within ``radius`` (m; one

@@ -24,7 +24,7 @@ def stretch(flight_over):
     return flight_over(slice(0, SCANS))
 
 
-def _slam(data, background, after_node=None, *, on_node=None):
+def _slam(data, background, *, on_node=None):
     """A run of ``data`` through :class:`Slam`; ``on_node(slam, node)`` is called after every node."""
     slam = Slam(Config(), anchor=data.poses[0], background=background)
     for index in range(len(data)):
