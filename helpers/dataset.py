@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 DEFAULT_WAYPOINTS = paths.DATA / "default_waypoints.csv"  # the default flight, shipped in the package (.mat beside)
 MARKER = ".helpers-dataset"  # lists what a dataset holds: the next may replace the folder while it holds only that
 LEGACY_MARKER = "poses_gt.txt"  # what marked a dataset's folder before: such a folder is left to the user
+DEFAULT_SCENE = "default scene"  # a dataset's name when it is cast over the embedded scene
 MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the reference's 1 m voxels)
 
 
@@ -129,7 +130,7 @@ def create_dataset(
     """
     sensor = sensor or SensorConfig(seed=noise_seed_from_environment())
     if map_path is None:
-        field, frame, name = _default_surface(), IDENTITY_FRAME, "default scene"
+        field, frame, name = _default_surface(), IDENTITY_FRAME, DEFAULT_SCENE
     else:
         tile = read_map(map_path)
         field, frame, name = height_field_from_points(tile.points, tile.labels, MAP_CELL), tile.frame, tile.source
@@ -165,6 +166,13 @@ def create_dataset(
         )
     truth = ScanBatch([], batch.hits, batch.labels)
     return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, truth, gnss)
+
+
+def is_default(dataset: Dataset, sensor: SensorConfig) -> bool:
+    """Whether ``dataset`` is the embedded default cast with ``sensor``: the default scene, the shipped loop."""
+    if dataset.name != DEFAULT_SCENE or dataset.sensor != sensor:
+        return False
+    return np.array_equal(dataset.waypoints, _with_altitude(read_waypoints(DEFAULT_WAYPOINTS), sensor))
 
 
 def fitted_loop(field: HeightField, spacing: float = DEFAULT_SPACING) -> np.ndarray:

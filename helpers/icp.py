@@ -13,7 +13,6 @@ points into the fixed cloud's frame, ``fixed ~ T[:3, :3] @ moving + T[:3, 3]``
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -28,6 +27,7 @@ from .geometry import check_points
 from .information import hessian_information, plane_information
 from .pose_graph_config import INFORMATION_SOURCES
 from .registration import SAMPLE_SIZE
+from .threads import threads  # small_gicp's k-d trees, covariances and searches; its alignment: ALIGN_THREADS
 
 ICP_NORMAL_NEIGHBORS = 20  # neighbours for the normals point-to-plane and generalized ICP need (Open3D's own choice)
 GICP_EPSILON = 1e-3  # generalized ICP: a point's covariance is this thin across its plane (Open3D's default)
@@ -61,13 +61,6 @@ class IcpResult:
 
 
 ALIGN_THREADS = 1  # small_gicp's align on several threads sums in an order that changes from run to run (see below)
-
-
-def threads() -> int:
-    """Threads for small_gicp's k-d trees, covariances and neighbour searches (its alignment takes
-    :data:`ALIGN_THREADS`): ``$OMP_NUM_THREADS`` when set (as Open3D and numpy obey it), else every core."""
-    value = os.environ.get("OMP_NUM_THREADS", "")
-    return int(value) if value.isdigit() and int(value) > 0 else os.cpu_count() or 1
 
 
 @dataclass(frozen=True, eq=False)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -21,12 +22,23 @@ import numpy as np
 from .config import Config
 from .errors import SlamError
 from .features import grid_average
-from .frames import STAGES, Frame, PairRegistration, describe, prepare, register_frames, register_pair, track_frames
+from .frames import (
+    STAGES,
+    Frame,
+    PairRegistration,
+    describe,
+    prepare,
+    reads_ahead,
+    register_frames,
+    register_pair,
+    track_frames,
+)
 from .geometry import check_points, check_pose, transform_points
 from .icp import icp_cloud
 from .icp_service import IcpService
 from .motion_guard import beyond, offset
 from .progress import progress_bar
+from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
 
@@ -89,6 +101,10 @@ class Odometry:
 
     def register(self, frame: Frame, index: int) -> PairRegistration | None:
         """Register ``frame`` (dataset scan ``index``) onto the previous frame and chain its pose."""
+        with one_blas_thread():  # OpenBLAS's idle threads would spin on the core FPFH and ICP use (helpers.threads)
+            return self._register(frame, index)
+
+    def _register(self, frame: Frame, index: int) -> PairRegistration | None:
         config, recent = self.config, self._recent
         start = time.perf_counter()
         if len(recent) > 1:  # the previous frame with the last scans merged for ICP
@@ -250,8 +266,22 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
         raise SlamError(f"odometry needs at least 2 accepted scans, got {len(indices)} from {len(scans)} scans")
     odometry = Odometry(config, first_pose)
     bar = progress_bar(len(indices), "odometry", enabled=progress)
-    for index in indices:
-        odometry.register(prepare(check_points(scans[index], f"scan {index}"), config), index)
-        bar.update(1)
+
+    def read_and_prepare(index: int) -> Frame:
+        return prepare(check_points(scans[index], f"scan {index}"), config)
+
+    if not reads_ahead(config):
+        for index in indices:
+            odometry.register(read_and_prepare(index), index)
+            bar.update(1)
+    else:  # each scan read and prepared in a thread while the one before is registered (as run_slam does)
+        with ThreadPoolExecutor(max_workers=1, thread_name_prefix="helpers-read-ahead") as ahead:
+            upcoming = ahead.submit(read_and_prepare, indices[0])
+            for k, index in enumerate(indices):
+                frame = upcoming.result()
+                if k + 1 < len(indices):
+                    upcoming = ahead.submit(read_and_prepare, indices[k + 1])
+                odometry.register(frame, index)
+                bar.update(1)
     bar.close()
     return odometry.result()

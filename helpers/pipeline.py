@@ -11,18 +11,21 @@ from __future__ import annotations
 import hashlib
 import logging
 import pickle
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from . import paths
 from .config import Config, noise_seed_from_environment
 from .configfile import config_to_toml
-from .dataset import Dataset, create_dataset
+from .dataset import Dataset, create_dataset, is_default
 from .edges_worker import STARTUP_NODES
+from .errors import SlamError
 from .factors import Edge
+from .frames import reads_ahead
 from .loopclosure import LoopQuery
 from .odometry import OdometryResult
 from .progress import progress_bar
-from .slam import Slam, SlamResult, Step, build_pose_graph
+from .slam import Slam, SlamResult, Step, build_pose_graph, prepare_scan
 
 log = logging.getLogger(__name__)
 
@@ -46,18 +49,31 @@ def run_slam(
     fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph.
     A flight of :data:`~helpers.edges_worker.STARTUP_NODES` nodes or more
     registers its edges back in a helper process while the next scan is
-    registered (:mod:`helpers.edges_worker`): the same result, sooner."""
+    registered (:mod:`helpers.edges_worker`), and a run in global mode reads
+    and prepares the next accepted scan in a thread while this one is
+    registered (:func:`helpers.frames.reads_ahead`): the same result, sooner."""
     config = config or Config()
-    nodes = len(odometry.indices) if odometry is not None else -(-len(dataset) // config.registration.skip_frames)
+    skip = config.registration.skip_frames
+    nodes = len(odometry.indices) if odometry is not None else -(-len(dataset) // skip)
     background = nodes >= STARTUP_NODES
     slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss, background=background)
     bar = progress_bar(len(dataset), "slam", enabled=progress)
-    loops = 0
-    for index in range(len(dataset)):
-        if slam.accepts(index):  # skipped scans are never read (nor cast, for a lazy dataset)
-            loops += slam.process(dataset.scans[index], index).loop is not None
-            bar.set_postfix(loops=loops, refresh=False)
-        bar.update(1)
+    loops, following = 0, None  # following: (index, future) of the next accepted scan, prepared meanwhile
+
+    def read_and_prepare(index: int):
+        return prepare_scan(dataset.scans[index], index, config)
+
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="helpers-read-ahead") as ahead:
+        for index in range(len(dataset)):
+            if slam.accepts(index):  # skipped scans are never read (nor cast, for a lazy dataset)
+                prepared = following[1] if following is not None and following[0] == index else None
+                scan = dataset.scans[index] if prepared is None else None
+                following = None
+                if odometry is None and reads_ahead(config) and index + skip < len(dataset):
+                    following = (index + skip, ahead.submit(read_and_prepare, index + skip))
+                loops += slam.process(scan, index, prepared).loop is not None
+                bar.set_postfix(loops=loops, refresh=False)
+            bar.update(1)
     bar.close()
     return slam.result(n_scans=len(dataset))
 
@@ -75,18 +91,28 @@ def core_fingerprint() -> bytes:
     return digest.digest()
 
 
-def default_run(config: Config | None = None) -> tuple[Dataset, SlamResult]:
+def default_run(config: Config | None = None, dataset: Dataset | None = None) -> tuple[Dataset, SlamResult]:
     """The dataset and the SLAM result of the embedded default, computed
     once and then read from :func:`helpers.paths.cache_dir` (keyed by the
     configuration and the core package's files, so any change recomputes; so
     does a damaged file). Notebooks 4 to 7 start from here instead of from
     hidden state; two of them computing it at once each write a whole file.
     ``config``: None is the defaults with the noise seed of
-    :func:`~helpers.config.noise_seed_from_environment`."""
+    :func:`~helpers.config.noise_seed_from_environment`. ``dataset``: the
+    embedded default already cast with ``config``'s sensor, returned as it
+    is (a notebook's second run of the same flight then casts no scan again);
+    None casts it."""
     config = config or Config().with_values(sensor={"seed": noise_seed_from_environment()})
     key = hashlib.sha256(config_to_toml(config).encode() + core_fingerprint()).hexdigest()[:16]
     cache = paths.cache_dir() / f"slam-{key}.pkl"
-    dataset = create_dataset(sensor=config.sensor)
+    if dataset is None:
+        dataset = create_dataset(sensor=config.sensor)
+    elif not is_default(dataset, config.sensor):
+        raise SlamError(
+            "default_run's dataset must be the embedded default (the default scene, the shipped loop) cast with "
+            f"the configuration's sensor; this one is the {dataset.name}"
+            f"{'' if dataset.sensor == config.sensor else ' cast with another sensor'}"
+        )
     try:
         with open(cache, "rb") as f:
             return dataset, pickle.load(f)

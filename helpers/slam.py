@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import logging
 import time
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -30,13 +31,14 @@ from .edges_worker import BackgroundEdges
 from .errors import SlamError
 from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
-from .frames import prepare
+from .frames import Frame, prepare
 from .geometry import check_points, check_pose
 from .icp_service import IcpService
 from .loopclosure import LoopCloser, LoopQuery
 from .odometry import Odometry, OdometryResult
 from .posegraph import OptimizationResult, PoseGraph
 from .submaps import SubmapIndex, build_submap
+from .threads import one_blas_thread
 
 log = logging.getLogger(__name__)
 
@@ -190,8 +192,17 @@ class Slam:
             return len(self.indices) < len(self.given.indices) and index == self.given.indices[len(self.indices)]
         return index % self.config.registration.skip_frames == 0
 
-    def process(self, scan: np.ndarray, index: int) -> Step:
-        """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order."""
+    def process(self, scan: np.ndarray | None, index: int, prepared: Future | None = None) -> Step:
+        """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order.
+
+        ``prepared``: the future of :func:`prepare_scan` on this scan with
+        this configuration, computed in another thread meanwhile (as
+        :func:`helpers.pipeline.run_slam` does for the next scan); ``scan`` is
+        then not read, and may be None. Only without a given odometry."""
+        with one_blas_thread():  # OpenBLAS's idle threads would spin on the core FPFH and ICP use (helpers.threads)
+            return self._process(scan, index, prepared)
+
+    def _process(self, scan: np.ndarray | None, index: int, prepared: Future | None) -> Step:
         if self.indices and index <= self.indices[-1]:
             raise SlamError(f"scan {index} comes after scan {self.indices[-1]}: scans must arrive in order")
         if not self.accepts(index):
@@ -201,7 +212,7 @@ class Slam:
         start = time.perf_counter()
         fallback, information = None, None
         if self.given is None:
-            frame = prepare(check_points(scan, f"scan {index}"), config)
+            frame = prepared.result() if prepared is not None else prepare_scan(scan, index, config)
             pair = self.odometry.register(frame, index)
             fallback = pair.fallback if pair is not None else None
             information = pair.information if pair is not None else None
@@ -272,6 +283,11 @@ class Slam:
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
         )
+
+
+def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame:
+    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`helpers.frames.prepare`)."""
+    return prepare(check_points(scan, f"scan {index}"), config)
 
 
 def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: Config) -> PoseGraph:

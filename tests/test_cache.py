@@ -109,3 +109,28 @@ def test_two_default_runs_at_once_write_one_whole_cache(tmp_path, stand_in_run):
     assert len(results) == 4
     (cache,) = _cache_files(tmp_path)
     assert pickle.loads(cache.read_bytes())["result"] in range(1, 5)
+
+
+def test_default_run_takes_the_dataset_it_would_cast_and_no_other(tmp_path, stand_in_run):
+    """Given the embedded default already cast with the configuration's sensor, default_run returns it
+    and casts nothing; another sensor's or another flight's dataset is refused, with what it is."""
+    from dataclasses import replace
+
+    from helpers.config import Config
+    from helpers.dataset import DEFAULT_WAYPOINTS, create_dataset
+    from helpers.errors import SlamError
+
+    config = Config()
+    cast = create_dataset(sensor=config.sensor, lazy=True)  # the scans are cast when read: none is here
+    returned, result = pipeline.default_run(config, dataset=cast)
+    assert returned is cast and result["result"] == 1  # the stand-in create_dataset ("dataset") was not called
+    assert pipeline.default_run(config)[0] == "dataset"  # without one, it is cast (here, the stand-in)
+    other_sensor = create_dataset(sensor=replace(config.sensor, seed=3), lazy=True)
+    with pytest.raises(SlamError, match="default scene cast with another sensor"):
+        pipeline.default_run(config, dataset=other_sensor)
+    short = tmp_path / "short.csv"
+    short.write_text("\n".join(DEFAULT_WAYPOINTS.read_text().splitlines()[:200]) + "\n")
+    other_flight = create_dataset(waypoints_path=short, sensor=config.sensor, lazy=True)
+    with pytest.raises(SlamError, match="the shipped loop"):
+        pipeline.default_run(config, dataset=other_flight)
+    assert len(stand_in_run) == 1  # only the first call ran (the second read its cache)

@@ -167,15 +167,16 @@ def test_the_matcher_multiplies_on_one_blas_thread(monkeypatch):
     """The matcher's block products run with numpy's BLAS held to one thread (faster on blocks this
     small), and the limit is lifted afterwards."""
     from helpers import features
+    from helpers.threads import BLAS
 
     seen = []
     real = np.matmul
 
     def spy(*args, **kwargs):
-        seen.append([m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"])
+        seen.append([m["num_threads"] for m in BLAS.info() if m["user_api"] == "blas"])
         return real(*args, **kwargs)
 
-    before = [m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"]
+    before = [m["num_threads"] for m in BLAS.info() if m["user_api"] == "blas"]
     assert before  # numpy's BLAS is found
     rng = np.random.default_rng(3)
     a = np.abs(rng.normal(size=(300, 33)))
@@ -185,4 +186,81 @@ def test_the_matcher_multiplies_on_one_blas_thread(monkeypatch):
     monkeypatch.undo()
     assert np.array_equal(pairs, np.column_stack([np.arange(300), np.arange(300)]))  # each its own match
     assert seen and all(threads == [1] * len(threads) for threads in seen)
-    assert [m["num_threads"] for m in features.BLAS.info() if m["user_api"] == "blas"] == before
+    assert [m["num_threads"] for m in BLAS.info() if m["user_api"] == "blas"] == before
+
+
+def test_the_matcher_shares_its_blocks_between_threads(monkeypatch):
+    """With two threads allowed, the block loop runs on two threads at once (each on whole blocks),
+    and the pairs are those of one thread."""
+    import threading
+
+    from helpers import features
+
+    rng = np.random.default_rng(5)
+    fixed = normalise_descriptors(rng.gamma(0.5, 1.0, (1000, 33)))
+    moving = fixed[rng.permutation(1000)] + rng.normal(0, 0.01, (1000, 33))
+    moving /= np.linalg.norm(moving, axis=1, keepdims=True)
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    alone = match_features(moving, fixed, 0.1, 0.97)
+    names, real = [], features._blocks
+    together = threading.Barrier(2, timeout=10)  # passes only when two parts run at the same time
+
+    def spy(q, *args):
+        names.append((threading.current_thread().name, len(q)))
+        together.wait()
+        return real(q, *args)
+
+    monkeypatch.setattr(features, "_blocks", spy)
+    monkeypatch.setenv("OMP_NUM_THREADS", "2")
+    shared = match_features(moving, fixed, 0.1, 0.97)
+    np.testing.assert_array_equal(shared, alone)
+    assert len(alone) > 500
+    # the nearest of every moving row in two parts of whole blocks, then the back check's rows in two
+    assert len(names) == 4 and all(name.startswith("helpers") for name, _ in names)
+    half = 4 * features.MATCH_BLOCK_ROWS  # 1000 rows are 8 blocks of 128 (the last short): 4 each
+    assert sorted(rows for _, rows in names[:2]) == [1000 - half, half]
+
+
+def test_a_forked_child_matches_on_threads_of_its_own():
+    """The thread pool is the process's own: a child forked after the parent matched on two
+    threads matches too (the parent's pool threads are not in it; waiting on them would hang)."""
+    import multiprocessing
+
+    rng = np.random.default_rng(6)
+    fixed = normalise_descriptors(rng.gamma(0.5, 1.0, (600, 33)))
+    expected = match_features(fixed, fixed, 0.1, 0.97)  # the parent's pool is made here (two threads or more)
+    context = multiprocessing.get_context("fork")
+    queue = context.Queue()
+    child = context.Process(target=_match_and_report, args=(fixed, queue))
+    child.start()
+    child.join(timeout=20)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("the forked child's matcher hung")
+    assert child.exitcode == 0
+    np.testing.assert_array_equal(queue.get(timeout=5), expected)
+
+
+def _match_and_report(fixed, queue):
+    queue.put(match_features(fixed, fixed, 0.1, 0.97))
+
+
+def test_slam_and_odometry_steps_run_on_one_blas_thread(monkeypatch):
+    """A scan's processing holds numpy's BLAS to one thread (its idle threads would spin on the
+    core FPFH needs) and gives the setting back afterwards."""
+    from helpers.config import Config
+    from helpers.odometry import Odometry
+    from helpers.slam import Slam
+    from helpers.threads import BLAS
+
+    def blas_threads():
+        return [m["num_threads"] for m in BLAS.info() if m["user_api"] == "blas"]
+
+    before, seen = blas_threads(), []
+    assert before
+    monkeypatch.setattr(Odometry, "_register", lambda self, frame, index: seen.append(blas_threads()))
+    monkeypatch.setattr(Slam, "_process", lambda self, scan, index, prepared: seen.append(blas_threads()))
+    Odometry(Config(), np.eye(4)).register(None, 0)
+    Slam(Config(), anchor=np.eye(4)).process(None, 0)
+    assert seen == [[1] * len(before)] * 2
+    assert blas_threads() == before

@@ -381,3 +381,30 @@ def test_odometry_on_a_local_map_stays_on_the_truth(flight, odometry):
     truth = flight.poses[mapped.indices]
     assert rpe(mapped.poses, truth).translation.max < STEP_BOUND_M
     assert ate(mapped.poses, truth).rmse <= 1.1 * ate(odometry.poses, truth).rmse + 0.02
+
+
+def test_run_odometry_reading_ahead_is_the_odometry_of_scans_prepared_in_turn(flight_over, monkeypatch):
+    """In global mode run_odometry prepares each scan in a thread while the one before is registered:
+    the same poses, steps and matches to the bit as an Odometry fed scans prepared one by one."""
+    import threading
+
+    import helpers.odometry
+    from helpers.odometry import Odometry
+
+    flight = flight_over(slice(0, 15))  # accepted: 0, 3, 6, 9, 12
+    config = Config()
+    names, real = [], helpers.odometry.prepare
+
+    def spy(points, cfg):
+        names.append(threading.current_thread().name)
+        return real(points, cfg)
+
+    monkeypatch.setattr(helpers.odometry, "prepare", spy)
+    ahead = run_odometry(flight, config=config)
+    assert len(names) == 5 and all(name.startswith("helpers-read-ahead") for name in names)
+    in_turn = Odometry(config, flight.poses[0])
+    for index in ahead.indices:
+        in_turn.register(prepare(flight.scans[index], config), index)
+    expected = in_turn.result()
+    assert np.array_equal(ahead.poses, expected.poses) and np.array_equal(ahead.relative, expected.relative)
+    assert np.array_equal(ahead.n_matches, expected.n_matches) and np.array_equal(ahead.rmse, expected.rmse)

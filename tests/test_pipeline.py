@@ -278,3 +278,42 @@ def test_each_scan_is_downsampled_and_made_ready_for_icp_once(flight_over, monke
     assert sorted(prepared) == sorted(id(cloud) for cloud in result.clouds)  # each cloud once, and no other
     config = result.config
     assert sorted(averaged) == sorted([config.features.grid_step, config.registration.icp_grid_step] * 8)
+
+
+def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flight_over, monkeypatch):
+    """In global mode run_slam reads and prepares every accepted scan after the first in its read-ahead
+    thread while the scan before is registered (in tracking mode, in turn); a scan that cannot be used
+    stops the run at that scan, after the scans before it, with the message it gets in place."""
+    import threading
+
+    import helpers.pipeline
+
+    flight = flight_over(slice(0, 12))  # accepted: 0, 3, 6, 9
+    read, processed = [], []
+    real_prepare, real_process = helpers.pipeline.prepare_scan, Slam.process
+
+    def spy_prepare(scan, index, config):
+        read.append((index, threading.current_thread().name))
+        return real_prepare(scan, index, config)
+
+    def spy_process(self, scan, index, prepared=None):
+        processed.append(index)
+        return real_process(self, scan, index, prepared)
+
+    monkeypatch.setattr(helpers.pipeline, "prepare_scan", spy_prepare)
+    monkeypatch.setattr(Slam, "process", spy_process)
+    result = run_slam(flight)
+    assert result.indices.tolist() == processed == [0, 3, 6, 9]
+    assert [index for index, _ in read] == [3, 6, 9]  # the first is prepared in place
+    assert all(name.startswith("helpers-read-ahead") for _, name in read)
+    read.clear(), processed.clear()
+    tracking = run_slam(flight, Config().with_values(registration={"mode": "tracking"}))
+    assert read == [] and processed == tracking.indices.tolist() == [0, 3, 6, 9]  # each prepared in turn
+    processed.clear()
+    broken = dataclasses.replace(flight, scans=[*flight.scans[:6], np.zeros((0, 3)), *flight.scans[7:]])
+    with pytest.raises(helpers.SlamError, match="scan 6") as raised:
+        run_slam(broken)
+    assert processed == [0, 3, 6]
+    with pytest.raises(helpers.SlamError) as in_place:
+        Slam(Config(), anchor=flight.poses[0]).process(broken.scans[6], 6)
+    assert str(raised.value) == str(in_place.value)
