@@ -95,6 +95,11 @@ def prepare(scan: np.ndarray, config: Config) -> Frame:
     return frame if registration.mode == "tracking" else describe(frame, config)
 
 
+def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame:
+    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`prepare`)."""
+    return prepare(check_points(scan, f"scan {index}"), config)
+
+
 def reads_ahead(config: Config) -> bool:
     """Whether a run prepares the next scan in a thread while it registers this one
     (:func:`helpers.pipeline.run_slam`, :func:`helpers.odometry.run_odometry`): in global mode,

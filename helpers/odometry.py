@@ -28,12 +28,13 @@ from .frames import (
     PairRegistration,
     describe,
     prepare,
+    prepare_scan,
     reads_ahead,
     register_frames,
     register_pair,
     track_frames,
 )
-from .geometry import check_points, check_pose, transform_points
+from .geometry import check_pose, transform_points
 from .icp import icp_cloud
 from .icp_service import IcpService
 from .motion_guard import beyond, offset
@@ -268,7 +269,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
     bar = progress_bar(len(indices), "odometry", enabled=progress)
 
     def read_and_prepare(index: int) -> Frame:
-        return prepare(check_points(scans[index], f"scan {index}"), config)
+        return prepare_scan(scans[index], index, config)
 
     if not reads_ahead(config):
         for index in indices:

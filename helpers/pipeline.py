@@ -21,11 +21,11 @@ from .dataset import Dataset, create_dataset, is_default
 from .edges_worker import STARTUP_NODES
 from .errors import SlamError
 from .factors import Edge
-from .frames import reads_ahead
+from .frames import prepare_scan, reads_ahead
 from .loopclosure import LoopQuery
 from .odometry import OdometryResult
 from .progress import progress_bar
-from .slam import Slam, SlamResult, Step, build_pose_graph, prepare_scan
+from .slam import Slam, SlamResult, Step, build_pose_graph
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +58,8 @@ def run_slam(
     background = nodes >= STARTUP_NODES
     slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss, background=background)
     bar = progress_bar(len(dataset), "slam", enabled=progress)
-    loops, following = 0, None  # following: (index, future) of the next accepted scan, prepared meanwhile
+    loops, following = 0, None  # following: the future of the next accepted scan (index + skip), prepared meanwhile
+    reading = odometry is None and reads_ahead(config)
 
     def read_and_prepare(index: int):
         return prepare_scan(dataset.scans[index], index, config)
@@ -66,11 +67,10 @@ def run_slam(
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="helpers-read-ahead") as ahead:
         for index in range(len(dataset)):
             if slam.accepts(index):  # skipped scans are never read (nor cast, for a lazy dataset)
-                prepared = following[1] if following is not None and following[0] == index else None
+                prepared, following = following, None
                 scan = dataset.scans[index] if prepared is None else None
-                following = None
-                if odometry is None and reads_ahead(config) and index + skip < len(dataset):
-                    following = (index + skip, ahead.submit(read_and_prepare, index + skip))
+                if reading and index + skip < len(dataset):
+                    following = ahead.submit(read_and_prepare, index + skip)
                 loops += slam.process(scan, index, prepared).loop is not None
                 bar.set_postfix(loops=loops, refresh=False)
             bar.update(1)

@@ -31,7 +31,7 @@ from .edges_worker import BackgroundEdges
 from .errors import SlamError
 from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
-from .frames import Frame, prepare
+from .frames import prepare_scan
 from .geometry import check_points, check_pose
 from .icp_service import IcpService
 from .loopclosure import LoopCloser, LoopQuery
@@ -195,7 +195,7 @@ class Slam:
     def process(self, scan: np.ndarray | None, index: int, prepared: Future | None = None) -> Step:
         """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order.
 
-        ``prepared``: the future of :func:`prepare_scan` on this scan with
+        ``prepared``: the future of :func:`~helpers.frames.prepare_scan` on this scan with
         this configuration, computed in another thread meanwhile (as
         :func:`helpers.pipeline.run_slam` does for the next scan); ``scan`` is
         then not read, and may be None. Only without a given odometry."""
@@ -283,11 +283,6 @@ class Slam:
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
         )
-
-
-def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame:
-    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`helpers.frames.prepare`)."""
-    return prepare(check_points(scan, f"scan {index}"), config)
 
 
 def build_pose_graph(odometry: OdometryResult, extra: list[Edge], loops, config: Config) -> PoseGraph:

@@ -393,13 +393,13 @@ def test_run_odometry_reading_ahead_is_the_odometry_of_scans_prepared_in_turn(fl
 
     flight = flight_over(slice(0, 15))  # accepted: 0, 3, 6, 9, 12
     config = Config()
-    names, real = [], helpers.odometry.prepare
+    names, real = [], helpers.odometry.prepare_scan
 
-    def spy(points, cfg):
+    def spy(scan, index, cfg):
         names.append(threading.current_thread().name)
-        return real(points, cfg)
+        return real(scan, index, cfg)
 
-    monkeypatch.setattr(helpers.odometry, "prepare", spy)
+    monkeypatch.setattr(helpers.odometry, "prepare_scan", spy)
     ahead = run_odometry(flight, config=config)
     assert len(names) == 5 and all(name.startswith("helpers-read-ahead") for name in names)
     in_turn = Odometry(config, flight.poses[0])
