@@ -44,7 +44,9 @@ def test_a_low_flight_gets_the_footprint_lengths():
     assert fitted.loop_closure.rmse_threshold == 0.15  # a quarter of the reference's 0.6 m: the rows are 4 x closer
     # every scan accepted: ICP onto the last six scans merged, and no edges back (the map holds their scans)
     assert fitted.registration.icp_local_map == 6 and fitted.pose_graph.edges_back == 1
-    assert len(reasons) == 10
+    # ... and every edge weighed by its own registration's information, loops under Huber's kernel
+    assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("hessian", "huber")
+    assert len(reasons) == 12
     # the rest is the reference's
     untouched = ("neighbors", "match_threshold", "match_ratio")
     assert all(getattr(fitted.features, k) == getattr(Config().features, k) for k in untouched)
@@ -59,6 +61,7 @@ def test_a_high_flight_with_sparse_waypoints():
     assert fitted.registration.icp_grid_step == 1.5 and fitted.registration.inlier_distance == 6.0
     assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
     assert fitted.registration.icp_local_map == 1 and fitted.pose_graph.edges_back == Config().pose_graph.edges_back
+    assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("icp", "cauchy")  # our defaults
     assert fitted.loop_closure.rmse_threshold == 1.2  # rows twice as far apart: a true match scores twice as much
 
 
@@ -78,3 +81,30 @@ def test_what_the_user_set_is_kept():
     assert fitted.features.grid_step == 0.8 and fitted.registration.skip_frames == 1
     assert "[features] grid_step = 0.8: as given" in reasons
     assert dataclasses.replace(fitted, features=mine.features).features == mine.features
+
+
+def test_a_low_flight_keeps_the_weights_the_user_set():
+    """The information weights a low flight gets are a fitted value like the others: a config file that sets the
+    graph's weights or its kernel keeps them (as the reference's identity weights, one config away)."""
+    low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
+    mine = Config().with_values(pose_graph=dict(graph_weights="identity", loop_kernel="none"))
+    keep = {("pose_graph", "graph_weights"), ("pose_graph", "loop_kernel")}
+    fitted, reasons = fit_to_flight(low, mine, keep=keep)
+    assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("identity", "none")
+    assert "[pose_graph] graph_weights = 'identity': as given" in reasons
+    assert fitted.registration.icp_local_map == 6  # the rest is still fitted
+
+
+def test_a_low_flight_registered_scan_to_scan_keeps_the_fixed_sigmas():
+    """The information weights were measured on the graph the fit builds (a local map, no edges back). A config
+    file that asks for scan-to-scan steps with edges back, which measure the same ground again, keeps our fixed
+    sigmas and Cauchy's kernel: under each edge's information that ground would count several times over."""
+    low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
+    mine = Config().with_values(registration=dict(icp_local_map=1), pose_graph=dict(edges_back=4))
+    for keep in ({("registration", "icp_local_map"), ("pose_graph", "edges_back")}, {("pose_graph", "edges_back")}):
+        fitted, _ = fit_to_flight(low, mine, keep=keep)
+        assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("icp", "cauchy")
+    # a local map of the user's own size, without edges back, is still the fit's graph
+    mine = Config().with_values(registration=dict(icp_local_map=4))
+    fitted, _ = fit_to_flight(low, mine, keep={("registration", "icp_local_map")})
+    assert fitted.pose_graph.graph_weights == "hessian" and fitted.registration.icp_local_map == 4
