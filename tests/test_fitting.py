@@ -44,9 +44,11 @@ def test_a_low_flight_gets_the_footprint_lengths():
     assert fitted.loop_closure.rmse_threshold == 0.15  # a quarter of the reference's 0.6 m: the rows are 4 x closer
     # every scan accepted: ICP onto the last six scans merged, and no edges back (the map holds their scans)
     assert fitted.registration.icp_local_map == 6 and fitted.pose_graph.edges_back == 1
-    # ... and every edge weighed by its own registration's information, loops under Huber's kernel
+    # ... and every edge weighed by its own registration's information, loops under Huber's kernel, the motion
+    # factor on
     assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("hessian", "huber")
-    assert len(reasons) == 12
+    assert fitted.pose_graph.motion_factor
+    assert len(reasons) == 13
     # the rest is the reference's
     untouched = ("neighbors", "match_threshold", "match_ratio")
     assert all(getattr(fitted.features, k) == getattr(Config().features, k) for k in untouched)
@@ -62,6 +64,7 @@ def test_a_high_flight_with_sparse_waypoints():
     assert fitted.loop_closure.sub_map_thresh == 15  # 540 m back, 36 m of flight per submap
     assert fitted.registration.icp_local_map == 1 and fitted.pose_graph.edges_back == Config().pose_graph.edges_back
     assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("icp", "cauchy")  # our defaults
+    assert not fitted.pose_graph.motion_factor
     assert fitted.loop_closure.rmse_threshold == 1.2  # rows twice as far apart: a true match scores twice as much
 
 
@@ -85,12 +88,14 @@ def test_what_the_user_set_is_kept():
 
 def test_a_low_flight_keeps_the_weights_the_user_set():
     """The information weights a low flight gets are a fitted value like the others: a config file that sets the
-    graph's weights or its kernel keeps them (as the reference's identity weights, one config away)."""
+    graph's weights, its kernel or the motion factor keeps them (as the reference's identity weights, one config
+    away)."""
     low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
-    mine = Config().with_values(pose_graph=dict(graph_weights="identity", loop_kernel="none"))
-    keep = {("pose_graph", "graph_weights"), ("pose_graph", "loop_kernel")}
+    mine = Config().with_values(pose_graph=dict(graph_weights="identity", loop_kernel="none", motion_factor=False))
+    keep = {("pose_graph", "graph_weights"), ("pose_graph", "loop_kernel"), ("pose_graph", "motion_factor")}
     fitted, reasons = fit_to_flight(low, mine, keep=keep)
     assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("identity", "none")
+    assert not fitted.pose_graph.motion_factor
     assert "[pose_graph] graph_weights = 'identity': as given" in reasons
     assert fitted.registration.icp_local_map == 6  # the rest is still fitted
 
@@ -104,6 +109,7 @@ def test_a_low_flight_registered_scan_to_scan_keeps_the_fixed_sigmas():
     for keep in ({("registration", "icp_local_map"), ("pose_graph", "edges_back")}, {("pose_graph", "edges_back")}):
         fitted, _ = fit_to_flight(low, mine, keep=keep)
         assert (fitted.pose_graph.graph_weights, fitted.pose_graph.loop_kernel) == ("icp", "cauchy")
+        assert not fitted.pose_graph.motion_factor
     # a local map of the user's own size, without edges back, is still the fit's graph
     mine = Config().with_values(registration=dict(icp_local_map=4))
     fitted, _ = fit_to_flight(low, mine, keep={("registration", "icp_local_map")})
