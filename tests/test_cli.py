@@ -147,7 +147,12 @@ def test_run_fits_the_parameters_to_a_low_flight_unless_told_not_to(grid_tile, t
     assert "[map] align_grid_step = 1.0: as given" in fitted.stdout
     used = load_config(tmp_path / "fitted" / "config.toml")
     assert used.registration.skip_frames == 1 and used.features.grid_step == 1.0 and used.map.align_grid_step == 1.0
+    # the graph of a flight where every scan is accepted: each edge's information, Huber, the motion factor
+    assert "[pose_graph] graph_weights = 'hessian':" in fitted.stdout
+    pose_graph = used.pose_graph
+    assert (pose_graph.graph_weights, pose_graph.loop_kernel, pose_graph.motion_factor) == ("hessian", "huber", True)
     kept = run(*common, "--reference-values", "--out", str(tmp_path / "kept"))
     assert kept.returncode == 0, kept.stderr
     assert "fitted" not in kept.stdout
-    assert load_config(tmp_path / "kept" / "config.toml").registration.skip_frames == 3
+    kept_config = load_config(tmp_path / "kept" / "config.toml")
+    assert kept_config.registration.skip_frames == 3 and kept_config.pose_graph == Config().pose_graph
