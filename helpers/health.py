@@ -151,16 +151,25 @@ def assess(result) -> Health:
             "unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a narrow strip. "
             "Fly higher, so that each scan sees more relief."
         )
+    drifted = correction > max(MAX_CORRECTION_SHARE * flown, CORRECTION_FLOOR_M)  # the last rule below
     if against and pull > CORRECTION_FLOOR_M:
         kernel = config.pose_graph.loop_kernel
         fate = f"the {kernel} kernel did not set them aside" if kernel != "none" else "no robust kernel"
         pairs = ", ".join(f"{loop.i}-{loop.j}" for loop in against[:4]) + (", ..." if len(against) > 4 else "")
+        # Where the loops also moved the trajectory far, the rest of the graph is the drifted odometry: a true loop
+        # disagrees with it as much as a false one would, and the run cannot tell them apart.
+        verdict = (
+            "either they are false or the odometry between their ends drifted more than its information says "
+            "(the loops moved the trajectory far, below), and the run cannot tell which"
+            if drifted
+            else "they are most likely false"
+        )
         problems.append(
             f"{len(against)} of {len(result.loops)} loop edges (nodes {pairs}) end more than {FALSE_LOOP_SIGMAS:g} "
-            "sigmas, and farther than a false loop is off, from where the rest of the graph puts them: they are "
-            f"most likely false, and they move the trajectory by up to {pull:.2f} m ({fate}). "
-            "Likely cause: repetitive or flat ground that matches within the loop thresholds. Try a lower "
-            f"[loop_closure] rmse_threshold (now {loops.rmse_threshold} m)."
+            f"sigmas, and farther than a false loop is off, from where the rest of the graph puts them: {verdict}; "
+            f"they move the trajectory by up to {pull:.2f} m ({fate}). "
+            "If false, the likely cause is repetitive or flat ground that matches within the loop thresholds: try "
+            f"a lower [loop_closure] rmse_threshold (now {loops.rmse_threshold} m)."
         )
     if revisits >= config.map.n_scans_per_submap and unclosed > revisits / 2:
         needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
@@ -170,7 +179,7 @@ def assess(result) -> Health:
             f"[loop_closure] sub_map_thresh = {loops.sub_map_thresh} submaps (about {needed} accepted scans), "
             "or the scans do not match within loop_closure_threshold. Try a smaller sub_map_thresh."
         )
-    if correction > max(MAX_CORRECTION_SHARE * flown, CORRECTION_FLOOR_M):
+    if drifted:
         share = f", {correction / flown:.1%} of the {flown:.0f} m flown" if flown > 0 else " (the flight hovered)"
         problems.append(
             f"The loop edges moved the trajectory by up to {correction:.1f} m{share}: the odometry drifted that "

@@ -106,6 +106,18 @@ def test_a_loop_is_judged_against_the_graph_with_its_own_information():
         assert ("most likely false" in health.warning()) == named
 
 
+def test_a_loop_against_a_graph_the_loops_moved_far_is_not_called_false():
+    """Looser steps (0.1 m each): the same loop 3 m off both stays many sigmas from the graph and moves it by
+    0.8 m, over 1 % of the 58 m flown. Then the rest of the graph may be drifted odometry as well as the loop
+    false, and the warning says it cannot tell (over a sparse tile true loops were named false so)."""
+    run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(3.0, 0.05)])
+    health = assess(run)
+    assert health.counts["n_loops_against_graph"] == 1 and health.counts["largest_correction_m"] > 0.58
+    warning = health.warning()
+    assert "most likely false" not in warning and "cannot tell which" in warning
+    assert "moved the trajectory by up to" in warning  # the drift, its own problem
+
+
 def test_a_true_loop_a_little_off_is_not_called_false():
     """A loop 0.4 m off (a true loop by the evaluation's rule, 1 m) and 8 sigmas off by its information:
     improbable, yet not a false loop. The odometry is stiff, so the graph stays where it is."""
