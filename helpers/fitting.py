@@ -72,7 +72,8 @@ LOW_FLIGHT_LOCAL_MAP = 6
 # benchmarks/bench_flights.py it left every one nearer the truth (Autzen at 150, 200 and 250 m: 0.88, 0.72, 0.56 m
 # -> 0.83, 0.69, 0.32 m, one false loop fewer at 150 and at 250 m; the sparse tile at 150 and 200 m: 2.44, 4.34 m
 # -> 1.99, 2.14 m; with the speed swinging by 30 %, Autzen at 250 m and the sparse tile at 150 m: 0.91, 6.72 m ->
-# 0.48, 3.88 m). On higher flights, where a few loops close and which ones decides the result, the icp sigmas
+# 0.48, 3.88 m; not every low flight: over Autzen at 200 m on the loop `run` fits, 1.18 -> 1.41 m, README). On
+# higher flights, where a few loops close and which ones decides the result, the icp sigmas
 # stayed better (at 700 m over other scenes: seed 11 0.31 -> 0.45 m; README, "Measured, not taken").
 # Only with the local map and no edges back, the graph they were measured on: a config that registers scan to
 # scan with edges back, each measuring the ground its steps measured, keeps the fixed sigmas (under the
