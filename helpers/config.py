@@ -223,6 +223,11 @@ class LoopClosureConfig(BoundedTable):
     max_attempts: int = param(3, "submaps registered at most per query, nearest first")
     max_returned: int = param(3, "matching submaps kept at most, best first")
     icp_max_iterations: int = param(50, "most ICP iterations when checking a submap or a loop edge")
+    best_scan_stop: float = param(
+        0.5,
+        "the best-scan search registers the matching submaps' scans best fitting first and stops at one whose "
+        "surface RMSE is under this share of rmse_threshold (0: every scan, the reference)",
+    )
     min_constraint: float = param(
         0.005,
         "a loop edge must pin the motion: ICP's weakest over strongest direction at least this (0: the reference)",
@@ -243,6 +248,7 @@ class LoopClosureConfig(BoundedTable):
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
+        self._check("best_scan_stop", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
         self._check("min_constraint", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
 
 
@@ -288,6 +294,7 @@ REFERENCE_WORKFLOW = {
         "search": "growth",
         "skip_after_loop": 0,
         "skip_after_closed_place": 0,
+        "best_scan_stop": 0.0,
     },
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }

@@ -298,7 +298,8 @@ def pairing(moving: IcpCloud, fixed: IcpCloud, T_fixed_moving: np.ndarray, inlie
         return float(paired.mean()), float("nan")
     normals = fixed.normals[index[paired]]
     eigen = np.linalg.eigvalsh(normals.T @ normals)
-    return float(paired.mean()), float(eigen[0] / eigen[2]) if eigen[2] > 0 else 0.0
+    # the smallest eigenvalue of this scatter is never below 0; rounding can leave it at -1e-17
+    return float(paired.mean()), float(max(eigen[0], 0.0) / eigen[2]) if eigen[2] > 0 else 0.0
 
 
 def icp_rmse(moving, fixed, T_fixed_moving: np.ndarray, inlier_distance: float) -> float:

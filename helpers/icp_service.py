@@ -153,6 +153,11 @@ class IcpService:
         surface = surface_rmse(moving, ready_fixed, T, self.inlier_distance, nearest=nearest)
         return _icp.IcpResult(T, surface, fit.information)
 
+    def score(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray) -> float:
+        """The surface RMSE of ``moving`` on ``fixed`` (arrays; ``fixed`` prepared through the cache) where
+        ``T_fixed_moving`` puts it, without ICP: what :meth:`__call__` scores its result by."""
+        return surface_rmse(moving, self.ready(fixed), T_fixed_moving, self.inlier_distance)
+
     def constraint(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray) -> float:
         """How well the pairs of a registration pin its translation (:func:`helpers.icp.pairing`)."""
         return _icp.pairing(self.ready(moving), self.ready(fixed), T_fixed_moving, self.inlier_distance)[1]

@@ -157,6 +157,48 @@ def test_the_best_scan_match_is_the_lowest_rmse_and_a_loop_edge_below_threshold(
     assert pinning.accepts(match.surface_rmse, 0.01) and not pinning.accepts(match.surface_rmse, 0.009)
 
 
+class ScoredIcp(ScriptedIcp):
+    """A ScriptedIcp that also scores a start without ICP, as :meth:`IcpService.score` does: by its own script."""
+
+    def __init__(self, rmse_by_cloud, score_by_cloud):
+        super().__init__(rmse_by_cloud)
+        self.score_by_cloud, self.scored = score_by_cloud, []
+
+    def score(self, *, moving, fixed, T_fixed_moving):
+        cloud = int(fixed[0, 0])
+        self.scored.append(cloud)
+        return self.score_by_cloud[cloud]
+
+
+def test_best_scan_search_registers_the_best_fitting_scans_first_and_stops_at_a_good_one():
+    scans = named_clouds(9)
+    poses = np.array([pose(t=(10.0 * k, 0, 0)) for k in range(9)])
+    seen = pose(0.1, (11, 1, 0))
+    candidates = LoopCandidates(np.array([2, 0]), np.array([0.1, 0.2]), np.array([seen, seen]))
+    rmse = {0: 0.5, 1: 0.2, 2: 0.4, 6: 0.35, 7: 0.25, 8: 0.9}  # after ICP
+    score = {0: 0.6, 1: 0.45, 2: 0.5, 6: 0.3, 7: 0.35, 8: 0.2}  # before it: 8, 6, 7, 1, 2, 0
+
+    def best(icp, stop):
+        chosen = settings(0, rmse_threshold=THRESHOLD, best_scan_stop=stop)
+        return best_scan_registration(SCAN, 20, candidates, scans, poses, 3, icp, chosen)
+
+    icp = ScoredIcp(rmse, score)
+    match = best(icp, 0.5)  # stops under 0.3 m: at scan 7, the third it registers
+    assert sorted(icp.scored) == [0, 1, 2, 6, 7, 8]
+    assert icp.ids == [8, 6, 7]
+    assert (match.i, match.j, match.surface_rmse) == (7, 20, 0.25)
+    np.testing.assert_allclose(match.relative, np.linalg.inv(poses[7]) @ seen @ pose(t=(0, 0, 0.07)))
+    icp = ScoredIcp(rmse, score)
+    assert best(icp, 0.7).i == 6 and icp.ids == [8, 6]  # under 0.42 m: scan 6 is enough
+    icp = ScoredIcp(rmse, score)
+    assert best(icp, 0.3).i == 1 and icp.ids == [8, 6, 7, 1, 2, 0]  # under 0.18 m: none, so all; the lowest kept
+    # 0 (the reference), or an ICP that cannot score: every scan in the submaps' order, none scored first
+    for stop, icp in ((0.0, ScoredIcp(rmse, score)), (0.5, ScriptedIcp(rmse))):
+        assert best(icp, stop).i == 1
+        assert icp.ids == [6, 7, 8, 0, 1, 2] and getattr(icp, "scored", []) == []
+    assert Config.reference().loop_closure.best_scan_stop == 0
+
+
 def test_bad_inputs_raise_slam_error():
     icp = ScriptedIcp({})
     with pytest.raises(SlamError, match="NaN"):
@@ -211,6 +253,13 @@ def test_real_icp_loop_edge_matches_the_true_relative_pose(icp):
     match = best_scan_registration(scan, 6, found, scans, truth, 3, icp_fn, settings(1))
     assert LoopCloser(settings(1), MapConfig(), icp_fn).accepts(match.surface_rmse, float("nan"))
     expected = np.linalg.inv(truth[match.i]) @ revisit  # pose_j = pose_i @ T_ij
+    if icp == "package":  # its score before ICP: low where the scan truly lies, high a metre and a half away
+        scored = icp_fn.score(moving=scan, fixed=scans[match.i], T_fixed_moving=expected)
+        shifted = icp_fn.score(moving=scan, fixed=scans[match.i], T_fixed_moving=pose(t=(1.5, 0, 0)) @ expected)
+        assert scored < 0.05 < 0.3 < shifted
+    every = best_scan_registration(scan, 6, found, scans, truth, 3, icp_fn, settings(1, best_scan_stop=0.0))
+    assert every.i == match.i  # the best-fitting scan first, then a stop: the reference's best scan all the same
+    np.testing.assert_allclose(every.relative, match.relative)
     assert np.linalg.norm(match.relative[:3, 3] - expected[:3, 3]) < 0.1
     assert Rotation.from_matrix(expected[:3, :3].T @ match.relative[:3, :3]).magnitude() < np.radians(0.3)
     # and the pose graph reads the edge the same way: the loop pulls the drifted node back
