@@ -22,7 +22,16 @@ from .mapio import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
 from .plyio import write_ply
 from .progress import progress_bar
 from .scene import HeightField, default_scene
-from .sensor import ScanBatch, Surface, cast_scans, check_coverage, check_heights, index_ranges, poses_from_waypoints
+from .sensor import (
+    ScanBatch,
+    Surface,
+    cast_scans,
+    check_coverage,
+    check_heights,
+    index_ranges,
+    labels_at,
+    poses_from_waypoints,
+)
 from .trajectory import write_tum
 from .waypoints import DEFAULT_SPACING, loop_waypoints, read_waypoints
 
@@ -81,13 +90,16 @@ class Dataset:
 
     @property
     def map_labels(self) -> np.ndarray:
-        """(M,) class of each map point (see :mod:`helpers.scene`)."""
-        return self._truth().labels
+        """(M,) class of each map point (see :mod:`helpers.scene`), looked up on first use."""
+        truth = self._truth()
+        if truth.labels is None:
+            truth.labels = labels_at(self.surface, truth.hits)
+        return truth.labels
 
     def _truth(self) -> ScanBatch:
         if self.truth is None:  # lazy scans: cast the flight once more, keeping only the hits
             batch = self.scans.cast(0, len(self.scans))
-            self.truth = ScanBatch([], batch.hits, batch.labels)
+            self.truth = ScanBatch([], batch.hits)
         return self.truth
 
     def scan_in_map(self, index: int) -> np.ndarray:
@@ -164,7 +176,7 @@ def create_dataset(
             f"{len(empty)} of {len(poses)} scans came back empty (indices {index_ranges(empty)}): "
             "those waypoints see no map within max_range"
         )
-    truth = ScanBatch([], batch.hits, batch.labels)
+    truth = ScanBatch([], batch.hits)
     return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, truth, gnss)
 
 

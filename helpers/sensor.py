@@ -99,7 +99,7 @@ class ScanBatch:
 
     scans: list[np.ndarray]  # (Ni, 3) float64 points in the sensor frame (with noise)
     hits: np.ndarray  # (sum Ni, 3) float32 true surface points in the map frame, scan after scan
-    labels: np.ndarray  # (sum Ni,) uint8 class of the surface cell each ray hit
+    labels: np.ndarray | None = None  # (sum Ni,) uint8 class of each hit's cell (None until asked: Dataset.map_labels)
 
 
 def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progress=None, first_index=0) -> ScanBatch:
@@ -144,7 +144,7 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         if progress is not None:
             progress.update(n)
     hits = hits[:used]
-    return ScanBatch(scans, hits, _labels_at(surface.field, hits))
+    return ScanBatch(scans, hits)  # the labels are looked up when asked for (labels_at: a quarter of the cast's time)
 
 
 def _noise_and_dropout(sensor: SensorConfig, first: int, n: int, k: int):
@@ -162,7 +162,8 @@ def _noise_and_dropout(sensor: SensorConfig, first: int, n: int, k: int):
     return noise * np.float32(sensor.range_noise), kept
 
 
-def _labels_at(field: HeightField, points: np.ndarray) -> np.ndarray:
+def labels_at(field: HeightField, points: np.ndarray) -> np.ndarray:
+    """(N,) class of the cell of ``field`` under each of ``points`` (N, 2+), as :mod:`helpers.scene` numbers them."""
     return field.labels[field.cell_of(points)]
 
 
