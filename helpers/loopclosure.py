@@ -278,13 +278,13 @@ def best_scan_registration(
     measures without ICP) and stops at the first whose RMSE after ICP is
     under ``best_scan_stop`` times ``rmse_threshold``: the submap check has
     already aligned the scan with them, and a scan that fits that well after
-    ICP leaves little for another to improve on. In runs over the default
-    flight, two laps of it, Autzen at 250 m and the sparse tile at 150 m (its
-    flat ground is where a start fits worst) it ran 325 of the 1,554
-    registrations the reference's search would. Replayed on queries recorded
-    with every scan registered, the reference's best scan was another in 14
-    of 223, its RMSE lower by at most 2.6 cm, and no loop was lost
-    (``benchmarks/bench_long.py`` measures the time saved on revisit laps).
+    ICP leaves little for another to improve on. Over the default flight, two
+    laps of it, Autzen at 250 m and the sparse tile at 150 m (its flat ground
+    is where a start fits worst) it ran 325 of the 1,554 registrations the
+    reference's search would; the reference's best scan was another in 14 of
+    the 217 queries, its RMSE lower by at most 2.6 cm, and no loop was lost
+    (``benchmarks/bench_best_scan.py``; ``bench_long.py`` measures the time
+    saved on revisit laps).
     """
     cap = None if settings is None else settings.icp_max_iterations
     scan_points = check_points(scan_points, "the current scan")

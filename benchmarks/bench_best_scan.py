@@ -1,0 +1,136 @@
+"""The best-scan search of a loop query: what the stop saves, and what it changes.
+
+    .venv/bin/python benchmarks/bench_best_scan.py [--flights default laps2 autzen-250 sparse-150]
+
+Once old submaps match, the reference registers the current scan by ICP
+onto every scan of them and keeps the lowest RMSE; ours (``[loop_closure]
+best_scan_stop``) registers them best fitting first and stops at one under
+that share of ``rmse_threshold`` (:func:`helpers.loopclosure.best_scan_registration`).
+Each flight runs once with the shipped search, in a fresh process. At every
+query this script also registers the scan onto every one of those scans, to
+see what the reference's search would have chosen from the same query, and
+reports:
+
+* queries, the scans of their matching submaps (what the reference's search
+  registers) and the registrations the stop ran;
+* queries whose chosen scan is another than the reference's, and by how much
+  the reference's RMSE was lower (at most);
+* loops lost: queries where the reference's choice was under ``rmse_threshold``
+  and ours was not (the pin test aside);
+* the run's loops and optimised ATE.
+
+Flights: ``bench_flights.py``'s names (the parameters fitted as ``run`` fits
+them, two laps on tiles) and ``lapsN``, the default loop flown N times in
+tracking mode as ``bench_long.py`` flies it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+CHILD = r"""
+import json, sys, tempfile
+import numpy as np
+sys.path.insert(0, sys.argv[2])
+import helpers
+import helpers.loopclosure as lc
+from helpers.config import Config
+from helpers.evaluation import run_metrics
+from helpers.pipeline import run_slam
+from helpers.submaps import scan_ids_of
+
+name, queries = sys.argv[1], []
+search = lc.best_scan_registration
+
+
+def recorded(scan_points, current_id, candidates, scans, poses, n, icp_fn, settings=None):
+    rmse = []  # the reference's search: every scan of the matching submaps, in its order
+    for submap_id, submap_pose in zip(candidates.ids, candidates.poses):
+        for i in scan_ids_of(int(submap_id), n):
+            init = np.linalg.inv(poses[i]) @ submap_pose
+            rmse.append(float(icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init,
+                                     max_iterations=settings.icp_max_iterations)[1]))
+    calls = []
+
+    class Counted:  # the run's ICP, counting the registrations the shipped search runs
+        def __call__(self, **kw):
+            calls.append(1)
+            return icp_fn(**kw)
+
+        def score(self, **kw):
+            return icp_fn.score(**kw)
+
+    edge = search(scan_points, current_id, candidates, scans, poses, n, Counted(), settings)
+    queries.append({"scans": len(rmse), "run": len(calls), "reference": min(rmse), "ours": edge.surface_rmse,
+                    "threshold": settings.rmse_threshold})
+    return edge
+
+
+lc.best_scan_registration = recorded
+if name.startswith("laps"):
+    xy = helpers.read_waypoints(helpers.DEFAULT_WAYPOINTS)
+    rows = np.concatenate([np.tile(xy[:628], (int(name[4:]), 1)), xy[:61]])
+    path = tempfile.mktemp(suffix=".csv")
+    np.savetxt(path, rows[:, :2], delimiter=",", header="x,y", comments="")
+    data = helpers.create_dataset(waypoints_path=path, lazy=True)
+    config = Config().with_values(registration={"mode": "tracking"})
+else:
+    from bench_flights import build_flight
+
+    data, config = build_flight({"name": name, "laps": 2, "swing": 0.0, "set": [], "map_error": False})
+result = run_slam(data, config)
+m = run_metrics(data, result)
+print(json.dumps({"queries": queries, "loops": m["n_loop_closures"], "false": m["n_false_loop_closures"],
+                  "ate": m["ate_rmse_optimized_m"]}))
+"""
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--flights", nargs="+", default=["default", "laps2", "autzen-250", "sparse-150"])
+    args = parser.parse_args()
+    print(
+        f"{'flight':12s} {'queries':>7s} {'scans':>6s} {'ICPs':>5s} {'other':>6s} {'gap m':>6s} {'lost':>5s}"
+        f" {'loops':>9s} {'ATE m':>6s}"
+    )
+    total = {"queries": 0, "scans": 0, "run": 0, "other": 0, "lost": 0, "gap": 0.0}
+    for name in args.flights:
+        done = subprocess.run([sys.executable, "-c", CHILD, name, str(HERE)], capture_output=True, text=True)
+        if done.returncode != 0:
+            print(f"{name:12s} failed: {done.stderr.strip().splitlines()[-1]}", flush=True)
+            continue
+        r = json.loads(done.stdout.strip().splitlines()[-1])
+        q = r["queries"]
+        other = [x for x in q if x["ours"] != x["reference"]]
+        gap = max((x["ours"] - x["reference"] for x in other), default=0.0)
+        lost = sum(x["reference"] < x["threshold"] <= x["ours"] for x in q)
+        row = {
+            "queries": len(q),
+            "scans": sum(x["scans"] for x in q),
+            "run": sum(x["run"] for x in q),
+            "other": len(other),
+            "lost": lost,
+            "gap": gap,
+        }
+        print(
+            f"{name:12s} {row['queries']:7d} {row['scans']:6d} {row['run']:5d} {row['other']:6d} {gap:6.3f}"
+            f" {lost:5d} {r['loops']:6d} ({r['false']}) {r['ate']:6.2f}",
+            flush=True,
+        )
+        for key in ("queries", "scans", "run", "other", "lost"):
+            total[key] += row[key]
+        total["gap"] = max(total["gap"], gap)
+    print(
+        f"{'all':12s} {total['queries']:7d} {total['scans']:6d} {total['run']:5d} {total['other']:6d}"
+        f" {total['gap']:6.3f} {total['lost']:5d}"
+    )
+
+
+if __name__ == "__main__":
+    main()
