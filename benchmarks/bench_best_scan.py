@@ -7,9 +7,9 @@ onto every scan of them and keeps the lowest RMSE; ours (``[loop_closure]
 best_scan_stop``) registers them best fitting first and stops at one under
 that share of ``rmse_threshold`` (:func:`helpers.loopclosure.best_scan_registration`).
 Each flight runs once with the shipped search, in a fresh process. At every
-query this script also registers the scan onto every one of those scans, to
-see what the reference's search would have chosen from the same query, and
-reports:
+query this script also runs the reference's search (the same function with
+``best_scan_stop = 0``), to see what it would have chosen from the same
+query, and reports:
 
 * queries, the scans of their matching submaps (what the reference's search
   registers) and the registrations the stop ran;
@@ -35,7 +35,7 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 
 CHILD = r"""
-import json, sys, tempfile
+import dataclasses, json, sys, tempfile
 import numpy as np
 sys.path.insert(0, sys.argv[2])
 import helpers
@@ -43,32 +43,30 @@ import helpers.loopclosure as lc
 from helpers.config import Config
 from helpers.evaluation import run_metrics
 from helpers.pipeline import run_slam
-from helpers.submaps import scan_ids_of
 
 name, queries = sys.argv[1], []
 search = lc.best_scan_registration
 
 
+class Counted:  # the run's ICP, counting the registrations a search runs
+    def __init__(self, icp_fn):
+        self.icp_fn, self.calls = icp_fn, 0
+
+    def __call__(self, **kw):
+        self.calls += 1
+        return self.icp_fn(**kw)
+
+    def score(self, **kw):
+        return self.icp_fn.score(**kw)
+
+
 def recorded(scan_points, current_id, candidates, scans, poses, n, icp_fn, settings=None):
-    rmse = []  # the reference's search: every scan of the matching submaps, in its order
-    for submap_id, submap_pose in zip(candidates.ids, candidates.poses):
-        for i in scan_ids_of(int(submap_id), n):
-            init = np.linalg.inv(poses[i]) @ submap_pose
-            rmse.append(float(icp_fn(moving=scan_points, fixed=scans[i], T_fixed_moving=init,
-                                     max_iterations=settings.icp_max_iterations)[1]))
-    calls = []
-
-    class Counted:  # the run's ICP, counting the registrations the shipped search runs
-        def __call__(self, **kw):
-            calls.append(1)
-            return icp_fn(**kw)
-
-        def score(self, **kw):
-            return icp_fn.score(**kw)
-
-    edge = search(scan_points, current_id, candidates, scans, poses, n, Counted(), settings)
-    queries.append({"scans": len(rmse), "run": len(calls), "reference": min(rmse), "ours": edge.surface_rmse,
-                    "threshold": settings.rmse_threshold})
+    every, ours = Counted(icp_fn), Counted(icp_fn)  # the reference's search (every scan) on the same query, then ours
+    reference = search(scan_points, current_id, candidates, scans, poses, n, every,
+                       dataclasses.replace(settings, best_scan_stop=0.0))
+    edge = search(scan_points, current_id, candidates, scans, poses, n, ours, settings)
+    queries.append({"scans": every.calls, "run": ours.calls, "reference": reference.surface_rmse,
+                    "ours": edge.surface_rmse, "threshold": settings.rmse_threshold})
     return edge
 
 
