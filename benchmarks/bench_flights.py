@@ -17,7 +17,8 @@ its own, and graded against the simulator's poses:
 flight (one period a lap); ``--set table.key=value`` overrides a configuration
 value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted value).
 The table prints ATE (odometry -> optimised), the one-step RPE, the mean ratio of
-estimated to true step length, loops (false), whether the run calls itself
+estimated to true step length, loops (false), the steps whose gated match was
+redone without the gate (``[features] match_gate``), whether the run calls itself
 trusted, and the first words of each problem named.
 """
 
@@ -57,7 +58,7 @@ ratio = float(np.mean(est_steps[moving] / true_steps[moving])) if moving.any() e
 print(json.dumps({"scans": len(data), "accepted": m["n_accepted"], "loops": m["n_loop_closures"],
                   "false": m["n_false_loop_closures"], "ate_odo": m["ate_rmse_odometry_m"],
                   "ate": m["ate_rmse_optimized_m"], "rpe": m["rpe_trans_1_m"], "ratio": ratio,
-                  "map": m.get("map_error_median_m"), "trusted": m["trusted"],
+                  "map": m.get("map_error_median_m"), "trusted": m["trusted"], "ungated": m["n_odometry_ungated"],
                   "problems": m["health"]["problems"], "seconds": seconds,
                   "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
 """
@@ -180,7 +181,7 @@ def main() -> None:
     args = parser.parse_args()
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
     print(f"{'flight':12} {'scans':>5} {'nodes':>5} {'ATE m':>13} {'RPE m':>6} {'step':>6} {'loops':>8} "
-          f"{'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
+          f"{'ungated':>7} {'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
     for name in args.flights:
         options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error}
         out = subprocess.run(
@@ -195,7 +196,7 @@ def main() -> None:
         problems = " | ".join(p[:60] for p in r["problems"])
         print(
             f"{name:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['rpe']:6.3f} {r['ratio']:6.4f} "
-            f"{r['loops']:5d} ({r['false']}) {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
+            f"{r['loops']:5d} ({r['false']}) {r['ungated']:7d} {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
             f"{r['peak_gib']:5.2f}  {problems}",
             flush=True,
         )

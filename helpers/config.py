@@ -88,6 +88,12 @@ class FeaturesConfig(BoundedTable):
     )
     match_threshold: float = param(0.1, "largest normalised descriptor distance of a match", "matchThreshold")
     match_ratio: float = param(0.97, "ratio test: best / second-best distance must be below it", "matchRatio")
+    match_gate: float = param(
+        1.0,
+        "with a last motion, a descriptor is compared only with the other scan's near where that motion puts it: "
+        "in its grid cell or the 8 around, cells this many times the shift a motion at the jump limits gives the "
+        "scan's farthest point (0: with all of them, the reference)",
+    )
 
     def __post_init__(self):
         self._between("grid_step", MIN_GRID, MAX_LENGTH, "a positive number of metres")
@@ -95,6 +101,7 @@ class FeaturesConfig(BoundedTable):
         self._between("keypoint_share", 0.01, 1.0, "a share (below 1 %, too few matches for a rigid fit)")
         self._check("match_threshold", lambda v: 0 < v <= 1, "in (0, 1]")
         self._check("match_ratio", lambda v: 0 < v <= 1, "in (0, 1]")
+        self._between("match_gate", 0.0, 100.0, "zero (no gate) or a positive factor")
 
 
 @dataclass(frozen=True)
@@ -287,6 +294,7 @@ class Config:
 
 # Where our defaults depart from the reference workflow, the reference's values (the README says why we changed them).
 REFERENCE_WORKFLOW = {
+    "features": {"match_gate": 0.0},
     "registration": {"robust_fit": "msac", "icp_grid_step": 0.0, "overlap_crop": False, "motion_guard": False},
     "loop_closure": {
         "loop_search_growth": 0.0,

@@ -90,6 +90,7 @@ def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
         "n_loop_closures": len(result.loops),
         "n_false_loop_closures": sum(loop.false for loop in grade_loops(dataset, result)),
         "n_odometry_fallbacks": len(result.odometry.fallbacks),
+        "n_odometry_ungated": int(np.sum(result.odometry.ungated)),  # gated matches redone without the gate
         "n_extra_edges": len(result.extra_edges),
         "ate_rmse_odometry_m": odometry.rmse,
         "ate_rmse_optimized_m": optimized.rmse,

@@ -173,7 +173,7 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         ),
         ("features", "grid_step"): (
             grid_step,
-            f"{doubled} (twice the scaled step: the matcher compares every descriptor with every one)"
+            f"{doubled} (twice the scaled step: FPFH and the matcher cost in proportion to the points, or more)"
             if grid_step > flight.surface_cell
             else f"the {flight.surface_cell:g} m surface ({doubled} would be finer)",
         ),

@@ -67,6 +67,7 @@ class PairRegistration:
     tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
     constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.icp.pairing)
     information: np.ndarray | None = None  # 6 x 6 of T_fine, translation first, as the ICP service calibrates it
+    ungated: bool = False  # the gated match (:func:`gate`) ended in a fallback: matched again without the gate
 
     def blind(self, motion: np.ndarray) -> bool:
         """Whether this step measured nothing: ICP started from ``motion`` (the last motion) on ground too flat
@@ -158,6 +159,36 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     return pair, "; ".join(reasons)
 
 
+def gate(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None):
+    """The matcher's gate in space for one step (``near`` of :func:`helpers.features.match_features`),
+    or None: no last motion ``guess``, or ``[features] match_gate = 0``.
+
+    A drone does not jump or spin between scans, so a moving point lands near
+    where the last motion puts it: a motion at the jump limits from it
+    (``tracking_max_jump_m``, ``tracking_max_jump_deg``) shifts the scan's
+    farthest point (horizontally ``r`` from the sensor) by at most
+    ``jump_m + 2 sin(jump_deg / 2) r``. The gate's cells are ``match_gate``
+    times that wide, and a descriptor is compared only with the other scan's
+    in its own cell and the 8 around it (about a tenth of them on the
+    default flight).
+    """
+    factor, fit = config.features.match_gate, config.registration
+    if guess is None or factor <= 0:
+        return None
+    far = float(np.max(np.hypot(moving.points[:, 0], moving.points[:, 1])))
+    cell = factor * (fit.tracking_max_jump_m + 2 * np.sin(np.radians(fit.tracking_max_jump_deg) / 2) * far)
+    if not cell > 0:  # jump limits of zero: no motion is allowed a shift, so there is nothing to gate by
+        return None
+    on_moving, on_fixed = _described(moving), _described(fixed)
+    moved = moving.points[on_moving] @ guess[:3, :3].T + guess[:3, 3]
+    return moved[:, :2], fixed.points[on_fixed, :2], cell
+
+
+def _described(frame: Frame) -> np.ndarray:
+    """Indices of the frame's points that have descriptors."""
+    return np.arange(len(frame.points)) if frame.keypoints is None else frame.keypoints
+
+
 def register_frames(
     moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None = None, icp=None, stale: int = 0
 ):
@@ -168,7 +199,24 @@ def register_frames(
     ``[registration]`` when None). ``stale``: the steps since the scans last
     measured the motion (it crossed a lake): the drone may have begun a turn
     meanwhile, so the motion guard's turn limit and the guess's rotation sigmas
-    are ``1 + stale`` times wider."""
+    are ``1 + stale`` times wider.
+
+    With a fresh last motion (``guess`` given, ``stale`` 0) the descriptors
+    are matched within the :func:`gate`; a gated step that ends in a fallback
+    (the fit failed, doubted or replaced) is registered again without the
+    gate, and that registration is returned (``ungated``), its timings
+    including both."""
+    near = gate(moving, fixed, config, guess) if stale == 0 else None
+    pair = _register(moving, fixed, config, guess, icp, stale, near)
+    if near is not None and pair.fallback is not None:
+        again = _register(moving, fixed, config, guess, icp, stale, None)
+        again.timings, again.ungated = _add(pair.timings, again.timings), True
+        return again
+    return pair
+
+
+def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: int, near):
+    """:func:`register_frames` with the matcher's gate ``near`` (None: none)."""
     momentum = guess is not None  # a last motion to fall back on (not the first step's identity)
     guess = np.eye(4) if guess is None else guess
     features, fit = config.features, config.registration
@@ -176,11 +224,11 @@ def register_frames(
 
     # 1. Match the keypoints' descriptors (current scan = moving, previous scan = fixed).
     start = time.perf_counter()
-    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
+    on_moving, on_fixed = _described(moving), _described(fixed)
     for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
         if len(frame.features) != len(chosen):
             raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
-    matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio)
+    matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio, near)
     matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
     timings["match"] = _ms(start)
 

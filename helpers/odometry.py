@@ -72,6 +72,7 @@ class OdometryResult:
     tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
     constraint: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K-1,) helpers.icp.pairing, per step
     information: list = field(default_factory=list)  # (K-1,) 6 x 6 calibrated information per step, or None
+    ungated: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps matched again ungated
 
 
 class Odometry:
@@ -170,6 +171,7 @@ class Odometry:
             tracked=np.array([p.tracked for p in pairs], dtype=bool),
             constraint=np.array([p.constraint for p in pairs], dtype=float),
             information=[p.information for p in pairs],
+            ungated=np.array([p.ungated for p in pairs], dtype=bool),
         )
 
 

@@ -50,6 +50,18 @@ MUTANTS = {
         "            self.blind.append(motion is not None and pair.blind(motion))\n",
         "            self.blind.append(False)\n",
     ),
+    "the matcher's gate reaches only its own cell": (
+        "tests/test_features.py",
+        "helpers/features.py",
+        "        around = [by_cell.get((cx + dx, cy + dy)) for dx in (-1, 0, 1) for dy in (-1, 0, 1)]\n",
+        "        around = [by_cell.get((cx, cy))]\n",
+    ),
+    "a step the gate misleads is not matched again": (
+        "tests/test_odometry.py",
+        "helpers/frames.py",
+        "    if near is not None and pair.fallback is not None:\n",
+        "    if False:\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",

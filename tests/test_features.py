@@ -152,6 +152,76 @@ def test_matcher_agrees_with_a_plain_float64_reference(seed):
         np.testing.assert_array_equal(match_features(moving, fixed, threshold, ratio), expected)
 
 
+def _gated_reference_matches(moving, fixed, moving_xy, fixed_xy, cell, threshold, ratio):
+    """The gated matcher's rules, plainly: a pair may be compared when the cells of their points
+    (``cell`` metres wide) are the same or touch; a ratio needs a runner-up among those."""
+    cm, cf = np.floor(moving_xy / cell), np.floor(fixed_xy / cell)
+    allowed = (np.abs(cm[:, None] - cf[None]) <= 1).all(axis=2)
+    d = np.where(allowed, np.linalg.norm(moving[:, None] - fixed[None], axis=2) / np.sqrt(2), np.inf)
+    pairs = []
+    for i, row in enumerate(d):
+        order = np.argsort(row, kind="stable")
+        best, second, j = row[order[0]], row[order[1]], order[0]
+        if np.isfinite(second) and best <= threshold and best < ratio * second and np.argmin(d[:, j]) == i:
+            pairs.append((i, j))
+    return np.array(pairs, dtype=np.int64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_gated_matcher_agrees_with_a_plain_float64_reference(seed):
+    """With a gate in space, each descriptor is compared only with those in its cell and the 8 around."""
+    rng = np.random.default_rng(seed)
+    fixed = normalise_descriptors(rng.gamma(0.5, 1.0, (900, 33)))
+    fixed_xy = rng.uniform([-150, -30], [150, 30], (900, 2))
+    pick = rng.permutation(900)[:600]
+    moving = fixed[pick] + rng.normal(0, 0.01, (600, 33))
+    moving /= np.linalg.norm(moving, axis=1, keepdims=True)
+    moving_xy = fixed_xy[pick] + rng.normal(0, 8.0, (600, 2))  # where the last motion puts them, metres off
+    for cell, threshold, ratio in [(15.0, 0.1, 0.97), (30.0, 0.05, 0.8), (6.0, 1.0, 1.0)]:
+        expected = _gated_reference_matches(moving, fixed, moving_xy, fixed_xy, cell, threshold, ratio)
+        assert len(expected) > 0
+        got = match_features(moving, fixed, threshold, ratio, near=(moving_xy, fixed_xy, cell))
+        np.testing.assert_array_equal(got, expected)
+    everywhere = match_features(moving, fixed, 0.1, 0.97, near=(moving_xy, fixed_xy, 1e4))
+    np.testing.assert_array_equal(everywhere, match_features(moving, fixed, 0.1, 0.97))  # one cell holds all
+
+
+def test_the_gate_keeps_a_far_lookalike_from_making_a_match_ambiguous():
+    """A descriptor repeated 100 m away ties with the true partner: without the gate the ratio
+    test drops the match, with it the far copy is never compared."""
+    a, b = normalise_descriptors(np.eye(33)[[0, 5]] + 0.1)
+    fixed = np.array([a, a, b])
+    fixed_xy = np.array([[0.0, 0.0], [100.0, 0.0], [1.0, 0.0]])
+    moving, moving_xy = np.array([a]), np.array([[0.5, 0.0]])
+    assert len(match_features(moving, fixed, 0.1, 0.97)) == 0
+    np.testing.assert_array_equal(match_features(moving, fixed, 0.1, 0.97, near=(moving_xy, fixed_xy, 10.0)), [[0, 0]])
+    lone = match_features(moving, fixed[:2], 0.1, 0.97, near=(moving_xy, fixed_xy[:2], 10.0))
+    assert len(lone) == 0  # one candidate in reach: no runner-up, no ratio, no match
+
+
+def test_the_gate_refuses_bad_positions():
+    good = np.eye(4) + 0.1  # any finite descriptors: the gate is checked first
+    with pytest.raises(SlamError, match="finite x, y"):
+        match_features(good, good, 0.1, 0.9, near=(np.zeros((3, 2)), np.zeros((4, 2)), 5.0))
+    with pytest.raises(SlamError, match="finite x, y"):
+        match_features(good, good, 0.1, 0.9, near=(np.full((4, 2), np.nan), np.zeros((4, 2)), 5.0))
+    with pytest.raises(SlamError, match="cell"):
+        match_features(good, good, 0.1, 0.9, near=(np.zeros((4, 2)), np.zeros((4, 2)), 0.0))
+
+
+def test_gated_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
+    script = (
+        "import numpy as np; from helpers.features import match_features, normalise_descriptors;"
+        "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
+        "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
+        "xy = rng.uniform(-100, 100, (3000, 2));"
+        "print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97,"
+        " near=(xy + rng.normal(0, 3, (3000, 2)), xy, 12.0)).tobytes().hex())"
+    )
+    outputs = thread_outputs(script)
+    assert len(outputs) == 1 and len(outputs.pop()) > 0
+
+
 def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
     script = (
         "import numpy as np; from helpers.features import match_features, normalise_descriptors;"

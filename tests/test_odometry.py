@@ -408,3 +408,39 @@ def test_run_odometry_reading_ahead_is_the_odometry_of_scans_prepared_in_turn(fl
     expected = in_turn.result()
     assert np.array_equal(ahead.poses, expected.poses) and np.array_equal(ahead.relative, expected.relative)
     assert np.array_equal(ahead.n_matches, expected.n_matches) and np.array_equal(ahead.rmse, expected.rmse)
+
+
+def test_with_a_last_motion_the_matches_stay_inside_the_gate_and_the_step_lands_on_the_truth(flight):
+    """Every match of a gated step pairs points whose cells touch, once the moving point is put where
+    the last motion (half a metre off) says; the step is as right as without the gate."""
+    from helpers.frames import gate
+
+    config = Config()
+    fixed, moving = (prepare(flight.scans[k], config) for k in (30, 33))
+    truth = np.linalg.inv(flight.poses[30]) @ flight.poses[33]
+    guess = truth @ _nudge(0.5)
+    moving_xy, fixed_xy, cell = gate(moving, fixed, config, guess)
+    assert 12 < cell < 20  # 1 m + 2 sin(3 deg) x the scan's farthest point, about 150 m out
+    pair = register_frames(moving, fixed, config, guess=guess)
+    ungated = register_frames(moving, fixed, config.with_values(features={"match_gate": 0.0}), guess=guess)
+    assert not pair.ungated and pair.fallback is None and len(pair.matches) > 100
+    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
+    rows, fixed_rows = np.searchsorted(on_moving, pair.matches[:, 0]), np.searchsorted(on_fixed, pair.matches[:, 1])
+    gap = np.abs(np.floor(moving_xy[rows] / cell) - np.floor(fixed_xy[fixed_rows] / cell))
+    assert gap.max() <= 1
+    for result in (pair, ungated):
+        assert np.linalg.norm(result.T_fine[:3, 3] - truth[:3, 3]) < STEP_BOUND_M
+        assert rotation_angle_deg(np.linalg.inv(truth) @ result.T_fine) < 0.2
+
+
+def test_a_step_the_gate_misleads_is_matched_again_without_it(flight):
+    """A last motion 80 m off (a wrong step before) puts the gate where the true partners are not:
+    the gated fit fails or is doubted, and the step is registered again without the gate, on the truth."""
+    config = Config()
+    fixed, moving = (prepare(flight.scans[k], config) for k in (30, 33))
+    truth = np.linalg.inv(flight.poses[30]) @ flight.poses[33]
+    wrong = truth.copy()
+    wrong[:3, 3] += [0.0, 80.0, 0.0]
+    pair = register_frames(moving, fixed, config, guess=wrong)
+    assert pair.ungated
+    assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < STEP_BOUND_M
