@@ -132,7 +132,7 @@ def measure(name: str, pairs: int, caps, apart: int) -> None:
         matches = match_features(
             moving_frame.features, fixed_frame.features, config.features.match_threshold, config.features.match_ratio
         )
-        keep = [np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving_frame, fixed_frame)]
+        keep = [f.described() for f in (moving_frame, fixed_frame)]
         moving = moving_frame.points[keep[0][matches[:, 0]]]
         fixed = fixed_frame.points[keep[1][matches[:, 1]]]
         n_matches.append(len(matches))

@@ -24,26 +24,15 @@ import numpy as np
 
 from helpers.config import Config
 from helpers.dataset import create_dataset
-from helpers.features import match_features
+from helpers.features import _neighbourhoods, match_features
 from helpers.frames import gate, prepare
 
 
 def compared_share(moving_xy: np.ndarray, fixed_xy: np.ndarray, cell: float) -> float:
-    """Mean share of the fixed points in a moving point's cell and the 8 around it (counted per cell)."""
-    span = 1 << 20  # cell indices of a scan stay far inside this
-
-    def keys(xy, dx=0, dy=0):
-        c = np.floor(xy / cell).astype(np.int64)
-        return (c[:, 0] + dx) * span + (c[:, 1] + dy)
-
-    cells, counts = np.unique(keys(fixed_xy), return_counts=True)
-    total = np.zeros(len(moving_xy))
-    for dx in (-1, 0, 1):
-        for dy in (-1, 0, 1):
-            k = keys(moving_xy, dx, dy)
-            at = np.clip(np.searchsorted(cells, k), 0, len(cells) - 1)
-            total += np.where(cells[at] == k, counts[at], 0)
-    return float(total.mean() / len(fixed_xy))
+    """Mean share of the fixed points a moving point is compared with: the matcher's own tiles
+    (``helpers.features._neighbourhoods``), each a cell's moving points against its 3 x 3 cells' fixed ones."""
+    tiles = _neighbourhoods(moving_xy, fixed_xy, cell)
+    return sum(len(rows) * len(columns) for rows, columns in tiles) / (len(moving_xy) * len(fixed_xy))
 
 
 def main() -> None:
@@ -84,9 +73,7 @@ def main() -> None:
                     moving.features, fixed.features, features.match_threshold, features.match_ratio, near
                 )
                 times.append(1000 * (time.perf_counter() - start))
-            on_moving, on_fixed = (
-                np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed)
-            )
+            on_moving, on_fixed = moving.described(), fixed.described()
             landed = moving.points[on_moving[pairs[:, 0]]] @ truth[:3, :3].T + truth[:3, 3]
             gap = np.linalg.norm(landed - fixed.points[on_fixed[pairs[:, 1]]], axis=1)
             correct = int(np.sum(gap < features.grid_step))

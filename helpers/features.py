@@ -168,22 +168,22 @@ def match_features(f_moving, f_fixed, threshold: float, ratio: float, near=None)
         raise SlamError("the ratio test needs at least 2 fixed descriptors")
     forward = backward = None
     if near is not None:
-        moving_xy, fixed_xy, cell = near
-        forward = _neighbourhoods(_check_xy(moving_xy, len(f_moving)), _check_xy(fixed_xy, len(f_fixed)), cell)
+        moving_xy, fixed_xy, cell = _check_xy(near[0], len(f_moving)), _check_xy(near[1], len(f_fixed)), near[2]
+        forward = _neighbourhoods(moving_xy, fixed_xy, cell)
     # Runners-up are needed only where the nearest passes the threshold.
     nearest, second = _two_nearest(f_moving, f_fixed, threshold * MAX_DESCRIPTOR_DISTANCE, forward)
     best_d = np.full(len(f_moving), np.inf)
     found = np.flatnonzero(nearest >= 0)  # all of them without a gate
     best_d[found] = _distance(f_moving[found], f_fixed[nearest[found]])
-    keep = best_d <= threshold
-    candidates = np.flatnonzero(keep & (second >= 0))  # a ratio needs a runner-up (without a gate there always is)
-    keep[:] = False
+    # a ratio needs a runner-up (without a gate there always is one)
+    candidates = np.flatnonzero((best_d <= threshold) & (second >= 0))
+    keep = np.zeros(len(f_moving), dtype=bool)
     second_d = _distance(f_moving[candidates], f_fixed[second[candidates]])
     keep[candidates] = best_d[candidates] < ratio * second_d
     moving = np.flatnonzero(keep)
     partners = nearest[moving]
     if near is not None:
-        backward = _neighbourhoods(np.asarray(fixed_xy, dtype=np.float64)[partners], moving_xy, cell)
+        backward = _neighbourhoods(fixed_xy[partners], moving_xy, cell)
     back, _ = _two_nearest(f_fixed[partners], f_moving, 0.0, backward)  # the nearest only
     moving = moving[back == moving]
     return np.column_stack([moving, nearest[moving]]).astype(np.int64)

@@ -50,6 +50,10 @@ class Frame:
     icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
     keypoints: np.ndarray | None = None  # (K,) indices of the points that have descriptors (None: all)
 
+    def described(self) -> np.ndarray:
+        """Indices of the points that have descriptors, ascending."""
+        return np.arange(len(self.points)) if self.keypoints is None else self.keypoints
+
 
 @dataclass
 class PairRegistration:
@@ -179,14 +183,9 @@ def gate(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None):
     cell = factor * (fit.tracking_max_jump_m + 2 * np.sin(np.radians(fit.tracking_max_jump_deg) / 2) * far)
     if not cell > 0:  # jump limits of zero: no motion is allowed a shift, so there is nothing to gate by
         return None
-    on_moving, on_fixed = _described(moving), _described(fixed)
+    on_moving, on_fixed = moving.described(), fixed.described()
     moved = moving.points[on_moving] @ guess[:3, :3].T + guess[:3, 3]
     return moved[:, :2], fixed.points[on_fixed, :2], cell
-
-
-def _described(frame: Frame) -> np.ndarray:
-    """Indices of the frame's points that have descriptors."""
-    return np.arange(len(frame.points)) if frame.keypoints is None else frame.keypoints
 
 
 def register_frames(
@@ -224,7 +223,7 @@ def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: in
 
     # 1. Match the keypoints' descriptors (current scan = moving, previous scan = fixed).
     start = time.perf_counter()
-    on_moving, on_fixed = _described(moving), _described(fixed)
+    on_moving, on_fixed = moving.described(), fixed.described()
     for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
         if len(frame.features) != len(chosen):
             raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")

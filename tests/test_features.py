@@ -209,25 +209,16 @@ def test_the_gate_refuses_bad_positions():
         match_features(good, good, 0.1, 0.9, near=(np.zeros((4, 2)), np.zeros((4, 2)), 0.0))
 
 
-def test_gated_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
+@pytest.mark.parametrize(
+    "near", ["", ", near=(xy + rng.normal(0, 3, (3000, 2)), xy, 12.0)"], ids=["every descriptor", "gated"]
+)
+def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs, near):
     script = (
         "import numpy as np; from helpers.features import match_features, normalise_descriptors;"
         "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
         "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
         "xy = rng.uniform(-100, 100, (3000, 2));"
-        "print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97,"
-        " near=(xy + rng.normal(0, 3, (3000, 2)), xy, 12.0)).tobytes().hex())"
-    )
-    outputs = thread_outputs(script)
-    assert len(outputs) == 1 and len(outputs.pop()) > 0
-
-
-def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs):
-    script = (
-        "import numpy as np; from helpers.features import match_features, normalise_descriptors;"
-        "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
-        "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
-        "print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97).tobytes().hex())"
+        f"print(match_features(m / np.linalg.norm(m, axis=1, keepdims=True), f, 0.1, 0.97{near}).tobytes().hex())"
     )
     outputs = thread_outputs(script)
     assert len(outputs) == 1 and len(outputs.pop()) > 0

@@ -424,7 +424,7 @@ def test_with_a_last_motion_the_matches_stay_inside_the_gate_and_the_step_lands_
     pair = register_frames(moving, fixed, config, guess=guess)
     ungated = register_frames(moving, fixed, config.with_values(features={"match_gate": 0.0}), guess=guess)
     assert not pair.ungated and pair.fallback is None and len(pair.matches) > 100
-    on_moving, on_fixed = (np.arange(len(f.points)) if f.keypoints is None else f.keypoints for f in (moving, fixed))
+    on_moving, on_fixed = moving.described(), fixed.described()
     rows, fixed_rows = np.searchsorted(on_moving, pair.matches[:, 0]), np.searchsorted(on_fixed, pair.matches[:, 1])
     gap = np.abs(np.floor(moving_xy[rows] / cell) - np.floor(fixed_xy[fixed_rows] / cell))
     assert gap.max() <= 1
