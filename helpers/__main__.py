@@ -154,14 +154,14 @@ def _run(args) -> int:
         print("\n".join(f"  {line}" for line in reasons))
     result = run_slam(data, config, progress=interactive, gnss=gnss)
     result.runtime_s = {"dataset": created, **result.runtime_s}
-    m = run_metrics(data, result, map_errors(result.map_points, data.map_points))
+    health = assess(result)
+    m = run_metrics(data, result, map_errors(result.map_points, data.map_points), health)
     out = write_run(result, args.out, m, data.poses[result.indices])
     print(
         f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
         f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "
         f"{m['ate_rmse_optimized_m']:.2f} m (optimised); {m['runtime_s']['total']:.0f} s; written to {out}"
     )
-    health = assess(result)
     print(health.summary())
     if not health.trusted:
         print(f'warning: {health.warning()} (metrics.json: "trusted": false)', file=sys.stderr)

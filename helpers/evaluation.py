@@ -68,14 +68,16 @@ def grade_loops(dataset, result) -> list[GradedLoop]:
     return graded
 
 
-def run_metrics(dataset, result, map_error: MapError | None = None) -> dict:
+def run_metrics(dataset, result, map_error: MapError | None = None, health=None) -> dict:
     """The figures of a run, units in the names: counts, ATE and RPE against
     ``dataset.poses`` at the nodes, the graph error, the runtimes and, if
     given, the map error (:func:`map_errors`). ``trusted`` and ``health``
     come from the run alone (:func:`helpers.health.assess`); a figure that is
     not a finite number is None and makes the run untrusted
-    (:func:`helpers.metrics.json_safe`)."""
-    health = assess(result)
+    (:func:`helpers.metrics.json_safe`). ``health``: the run's
+    :class:`~helpers.health.Health`, if already assessed (it optimises the
+    graph again, seconds on a long flight)."""
+    health = assess(result) if health is None else health
     poses_gt = dataset.poses[result.indices]
     odometry, optimized = ate(result.poses_odometry, poses_gt), ate(result.poses_optimized, poses_gt)
     rpe_1 = rpe(result.poses_optimized, poses_gt, 1)

@@ -86,6 +86,7 @@ class SlamResult:
     n_scans: int  # scans in the dataset, accepted or not
     runtime_s: dict = field(default_factory=dict)
     edges_back_tried: int = 0  # registrations to older scans attempted (``extra_edges`` holds those kept)
+    n_gnss_fixes: int = 0  # GNSS factors in the graph (none: the graph is build_pose_graph's of the run's edges)
 
     @property
     def loops(self) -> list[Edge]:
@@ -261,7 +262,8 @@ class Slam:
         start = time.perf_counter()
         extra = self.edges_back.sorted()
         graph = build_pose_graph(odometry, extra, self.loops.loops, config)
-        for fix in self.gnss.factors(self.indices) if self.gnss is not None else ():
+        fixes = self.gnss.factors(self.indices) if self.gnss is not None else []
+        for fix in fixes:
             graph.add_factor(fix)
         optimized = graph.optimize(anchor_pose=self.anchor, loop_kernel=config.pose_graph.loop_kernel)
         runtime["pose_graph"] = time.perf_counter() - start
@@ -282,6 +284,7 @@ class Slam:
             n_scans=self.indices[-1] + 1 if n_scans is None else n_scans,
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
+            n_gnss_fixes=len(fixes),
         )
 
 

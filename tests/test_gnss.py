@@ -214,6 +214,7 @@ def test_gnss_of_2_m_costs_little_where_the_lidar_is_good(flight_over):
     lidar = run_slam(data, config)
     fixes = GnssFixes(np.arange(len(data)), simulate_gnss(data.poses[:, :3, 3], 2.0, 2.0, seed=0), np.full(3, 2.0))
     both = run_slam(data, config, odometry=lidar.odometry, gnss=fixes)
+    assert lidar.n_gnss_fixes == 0 and both.n_gnss_fixes == len(both.indices)  # one fix a node
     truth = data.poses[lidar.indices]
     alone, fixed = ate(lidar.poses_optimized, truth).rmse, ate(both.poses_optimized, truth).rmse
     assert fixed <= alone + 0.1, (alone, fixed)

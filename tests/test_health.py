@@ -8,7 +8,15 @@ import numpy as np
 from helpers.config import Config
 from helpers.factors import Edge
 from helpers.gnss import GnssFixes
-from helpers.health import CORRECTION_FLOOR_M, FALSE_LOOP_SIGMAS, WEAK_SIGMA_M, assess, loop_residuals
+from helpers.health import (
+    CORRECTION_FLOOR_M,
+    FALSE_LOOP_SIGMAS,
+    WEAK_SIGMA_M,
+    _optimized,
+    _rebuilt,
+    assess,
+    loop_residuals,
+)
 from helpers.information import calibrated
 from helpers.odometry import OdometryResult
 from helpers.slam import build_pose_graph
@@ -60,6 +68,7 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
         queries=queries,
         extra_edges=list(extra),
         edges_back_tried=len(extra),
+        n_gnss_fixes=len(fixes),
     )
 
 
@@ -166,3 +175,18 @@ def test_gnss_fixes_moving_the_trajectory_are_no_loop_correction():
     run = _run(loops=[_loop_off_by(0.0, 0.05)], fixes=fixes)
     assert run.graph.poses[-1, 1, 3] > 1.0  # the fixes did move it
     assert assess(run).counts["largest_correction_m"] < 0.01
+
+
+def test_the_runs_own_graph_is_reused_only_where_it_is_the_rebuilt_one():
+    """The health measures compare the run's graph rebuilt from its edges with variants of it. Without GNSS
+    that graph is the run's own, to the bit, so its poses are taken as they are (one optimisation fewer);
+    with fixes in the run's graph it is optimised again without them, and differs."""
+    run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(1.5, 0.1)])
+    assert _rebuilt(run) is run.graph.poses
+    np.testing.assert_array_equal(_rebuilt(run), _optimized(run, run.loops))
+    positions = np.array([[2.0 * k, 3.0, 0.0] for k in range(NODES)])
+    fixes = GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)).factors(np.arange(NODES) * 3)
+    run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(1.5, 0.1)], fixes=fixes)
+    rebuilt = _rebuilt(run)
+    np.testing.assert_array_equal(rebuilt, _optimized(run, run.loops))
+    assert np.abs(rebuilt[:, 1, 3] - run.graph.poses[:, 1, 3]).max() > 1.0  # the fixes' pull is left out
