@@ -1,7 +1,7 @@
 """Whole flights on ground the parameters were not tuned on: accuracy, loops, the trust flag and time.
 
     nice -n 10 .venv/bin/python benchmarks/bench_flights.py [--flights default seed11-700 sparse-150 ...]
-        [--laps 2] [--swing 0.3] [--set pose_graph.graph_weights=icp ...] [--map-error]
+        [--laps 2] [--swing 0.3] [--seeds 0 1 2] [--set pose_graph.graph_weights=icp ...] [--map-error]
 
 Each flight is run as ``python -m helpers run`` runs it (parameters fitted to
 the flight by :func:`helpers.fitting.fit_to_flight`), in a fresh process of
@@ -15,7 +15,10 @@ its own, and graded against the simulator's poses:
 
 ``--swing S`` spaces the waypoints so that the speed swings by +-S along the
 flight (one period a lap); ``--set table.key=value`` overrides a configuration
-value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted value).
+value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted value);
+``--seeds`` flies each flight once per lidar noise seed (``[sensor] seed``; the
+low flights move by tens of percent from one seed to the next, so compare
+variants on several).
 The table prints ATE (odometry -> optimised), the one-step RPE, the mean ratio of
 estimated to true step length, loops (false), the steps whose gated match was
 redone without the gate (``[features] match_gate``), whether the run calls itself
@@ -98,7 +101,7 @@ def build_flight(options: dict):
         xy = _swung(xy, options["swing"])
     ground = float(np.median(field.z[field.cell_of(xy)]))
     altitude = 700.0 if above is None else ground + above
-    sensor = SensorConfig(altitude=altitude, seed=0)
+    sensor = SensorConfig(altitude=altitude, seed=options.get("seed", 0))
     waypoints = np.column_stack([xy, np.full(len(xy), altitude)])
     poses = poses_from_waypoints(waypoints)
     data = Dataset(LazyScans(Surface.from_height_field(field), poses, sensor), poses, waypoints, field,
@@ -177,25 +180,35 @@ def main() -> None:
         metavar="TABLE.KEY=VALUE",
         help="after the fit; TABLE.KEY*=FACTOR multiplies the fitted value",
     )
+    parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="lidar noise seeds (default 0)")
     parser.add_argument("--map-error", action="store_true", help="also the median map error (slower)")
     args = parser.parse_args()
+    try:  # a misspelt --set fails here, once, not in every flight's process
+        from helpers.config import Config
+        from helpers.errors import SlamError
+
+        with_settings(Config(), args.set)
+    except (AttributeError, TypeError, ValueError, SlamError) as error:
+        sys.exit(f"error: --set {' '.join(args.set)}: {error}")
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
     print(f"{'flight':12} {'scans':>5} {'nodes':>5} {'ATE m':>13} {'RPE m':>6} {'step':>6} {'loops':>8} "
           f"{'ungated':>7} {'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
-    for name in args.flights:
-        options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error}
+    for name, seed in [(name, seed) for name in args.flights for seed in args.seeds]:
+        options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error,
+                   "seed": seed}  # fmt: skip
+        label = name if args.seeds == [0] else f"{name}/{seed}"
         out = subprocess.run(
             [sys.executable, "-c", CHILD, json.dumps(options), str(HERE)], capture_output=True, text=True, env=env
         )
         if out.returncode != 0:
-            print(f"{name:12} failed: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
+            print(f"{label:12} failed: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
             continue
         r = json.loads(out.stdout.strip().splitlines()[-1])
         ate = f"{r['ate_odo']:.2f}->{r['ate']:.2f}"
         mapped = f"{r['map']:.3f}" if r["map"] is not None else "-"
         problems = " | ".join(p[:60] for p in r["problems"])
         print(
-            f"{name:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['rpe']:6.3f} {r['ratio']:6.4f} "
+            f"{label:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['rpe']:6.3f} {r['ratio']:6.4f} "
             f"{r['loops']:5d} ({r['false']}) {r['ungated']:7d} {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
             f"{r['peak_gib']:5.2f}  {problems}",
             flush=True,

@@ -86,6 +86,17 @@ LOW_FLIGHT_LOCAL_MAP = 6
 # left the ATE within 0.06 m of its value without it (0.83 -> 0.85, 0.32 -> 0.30, 1.99 -> 2.01 m; swinging 0.48
 # -> 0.44, 3.88 -> 3.82 m).
 LOW_FLIGHT_GRAPH = {"graph_weights": "hessian", "loop_kernel": "huber", "motion_factor": True}
+# Over a lake or a field a step is not pinned along the track at all, and two things made such steps come out
+# short, 0.3-1 m a step, for tens of steps (benchmarks/bench_flights.py --seeds: a slide the loops cannot undo,
+# as both laps make it). Generalized ICP's plane covariances keep a little weight along a flat ground, so its
+# Hessian claimed a 0.02 m sigma along the track over water, and the momentum blend (helpers.motion_guard)
+# followed ICP's slide; the point-to-plane information of the same pairs says the step is loose there
+# (``information = "plane"``). And ICP onto the local map, started from a coarse fit metres off, crawls along
+# the weak direction: 30 iterations left it short of its minimum. Both, on three lidar noise seeds each (ATE
+# optimised, m): the sparse tile at 150 m 35.8, 1.30, 0.74 -> 0.71, 0.35, 0.44; at 200 m 0.98, 0.78, 8.75 ->
+# 0.22, 0.29, 0.25; Autzen at 150 m 0.96, 1.68, 0.84 -> 0.55, 0.55, 0.49; each alone helped less.
+LOW_FLIGHT_ICP = {"icp_max_iterations": 100}
+LOW_FLIGHT_INFORMATION = "plane"
 # A true loop edge's surface RMSE comes from how the two scans sample the ground: rows of rays 0.2 deg apart,
 # so it shrinks with the height (0.26-0.39 m at the reference's 600 m, 0.02-0.13 m on Autzen 150 m above the
 # ground), while a false one, laid on ground metres away, stayed at 0.17-0.57 m on the low flights of
@@ -206,6 +217,16 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
             f"{LOW_FLIGHT_LOCAL_MAP} scans merged, whose rows interleave (the reference: the previous scan)",
         )
         wanted[("pose_graph", "edges_back")] = (1, "the local map already holds the scans the edges back would measure")
+        wanted[("registration", "icp_max_iterations")] = (
+            LOW_FLIGHT_ICP["icp_max_iterations"],
+            "ICP onto the local map crawls along the track where the ground pins it loosely: 30 iterations "
+            "stopped short of its minimum",
+        )
+        wanted[("pose_graph", "information")] = (
+            LOW_FLIGHT_INFORMATION,
+            "each step's information from the point-to-plane Hessian of its pairs, which sees that a step over "
+            "flat ground is loose along it (generalized ICP's own claims a few centimetres there)",
+        )
         if _kept(config, keep, "registration", "icp_local_map", LOW_FLIGHT_LOCAL_MAP) > 1 and (
             _kept(config, keep, "pose_graph", "edges_back", 1) == 1
         ):  # the graph the weights were measured on (see LOW_FLIGHT_GRAPH)
