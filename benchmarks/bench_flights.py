@@ -11,6 +11,7 @@ its own, and graded against the simulator's poses:
 * ``seedN-700``: the procedural scene of seed N, the shipped loop turned by 12 deg, at 700 m;
 * ``sparse-150``: a 300 m square of the default scene resampled at a real tile's density (1.8
   points per m²) and rebuilt as a tile is, flown 150 m above its ground (the fitted loop of a tile, ``--laps`` times);
+  ``sparseN-H``: the same of scene seed N, H m above its ground;
 * ``autzen-150`` / ``autzen-250``: the real tile in ``../shared/data``, its fitted loop, 150 or 250 m above its ground.
 
 ``--swing S`` spaces the waypoints so that the speed swings by +-S along the
@@ -86,8 +87,10 @@ def build_flight(options: dict):
         seed = name.removeprefix("seed").split("-")[0]
         field = default_scene(seed=int(seed))
         xy, above = _turned(read_waypoints(DEFAULT_WAYPOINTS)[:, :2], field), None
-    elif name.startswith("sparse-"):
-        field, above = sparse_tile(default_scene()), float(name.split("-")[1])
+    elif name.startswith("sparse"):  # sparse-150: the default scene's tile; sparse11-150: scene seed 11's
+        seed = name.removeprefix("sparse").split("-")[0]
+        field = sparse_tile(default_scene() if not seed else default_scene(seed=int(seed)))
+        above = float(name.split("-")[1])
         xy = _laps(fitted_loop(field), laps)
     elif name.startswith("autzen-"):
         if not AUTZEN.exists():
@@ -96,7 +99,7 @@ def build_flight(options: dict):
         field, above = height_field_from_points(tile.points, tile.labels, MAP_CELL), float(name.split("-")[1])
         xy = _laps(fitted_loop(field), laps)
     else:
-        sys.exit(f"error: unknown flight {name!r}: use one of {', '.join(FLIGHTS)} (seedN-700 for any N)")
+        sys.exit(f"error: unknown flight {name!r}: use one of {', '.join(FLIGHTS)} (or seedN-700, sparseN-H, autzen-H)")
     if options["swing"]:
         xy = _swung(xy, options["swing"])
     ground = float(np.median(field.z[field.cell_of(xy)]))

@@ -301,14 +301,36 @@ def test_after_a_blind_step_the_guess_is_the_last_step_and_its_age_is_counted():
     assert staleness([False] + [True] * 5) == 5
 
 
-def _benchmark_flight(name: str, swing: float):
-    """(lazy dataset, fitted config) of ``benchmarks/bench_flights.py``'s flight ``name``, two laps."""
+def _benchmark_flight(name: str, swing: float, seed: int = 0):
+    """(lazy dataset, fitted config) of ``benchmarks/bench_flights.py``'s flight ``name``, two laps, lidar noise
+    seed ``seed``."""
     benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
     if benchmarks not in sys.path:
         sys.path.insert(0, benchmarks)
     from bench_flights import build_flight
 
-    return build_flight({"name": name, "laps": 2, "swing": swing, "set": [], "map_error": False})
+    return build_flight({"name": name, "laps": 2, "swing": swing, "set": [], "map_error": False, "seed": seed})
+
+
+def test_steps_over_a_lake_keep_their_length():
+    """150 m above the sparse tile (lidar noise seed 1), scans 110-125 cross a lake: no relief pins a step along
+    the track. Generalized ICP's Hessian still claimed a 0.02 m sigma there, so the momentum blend followed ICP's
+    slide towards the last scan, and the next guess started from the shortened step: the steps came out 0.5-1.3
+    m short one after another (a mean step ratio of 0.925 over these 60), and the loops could not undo it, as
+    both laps slid alike (ATE 35.8 m). Fitted for a low flight, each step's information comes from the
+    point-to-plane Hessian, which is near zero along the track there, and ICP is given time to converge."""
+    data, config = _benchmark_flight("sparse-150", swing=0.0, seed=1)
+    assert config.pose_graph.information == "plane"
+    scans = list(range(70, 130))
+    result = run_odometry([data.scans[k] for k in scans], data.poses[scans[0]], config)
+    truth = np.linalg.inv(data.poses[scans[:-1]]) @ data.poses[scans[1:]]
+    true_m = np.linalg.norm(truth[:, :3, 3], axis=1)
+    estimated_m = np.linalg.norm(np.asarray(result.relative)[:, :3, 3], axis=1)
+    errors_m = np.linalg.norm(np.asarray(result.relative)[:, :3, 3] - truth[:, :3, 3], axis=1)
+    # a step over water follows the momentum, which wanders: within 0.6 m (0.4 here, 0.5 on seeds 0, 2 and 3),
+    # and the 120 m keep their length within 3 % (0.2 % here; seed 3 ran 2 % long)
+    assert errors_m.max() < 0.75, np.round(estimated_m - true_m, 2)
+    assert abs(np.mean(estimated_m / true_m) - 1.0) < 0.03, np.round(estimated_m - true_m, 2)
 
 
 def test_a_turn_begun_over_water_is_followed(autzen):
