@@ -186,10 +186,10 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="lidar noise seeds (default 0)")
     parser.add_argument("--map-error", action="store_true", help="also the median map error (slower)")
     args = parser.parse_args()
-    try:  # a misspelt --set fails here, once, not in every flight's process
-        from helpers.config import Config
-        from helpers.errors import SlamError
+    from helpers.config import Config
+    from helpers.errors import SlamError
 
+    try:  # a misspelt --set fails here, once, not in every flight's process
         with_settings(Config(), args.set)
     except (AttributeError, TypeError, ValueError, SlamError) as error:
         sys.exit(f"error: --set {' '.join(args.set)}: {error}")

@@ -95,7 +95,7 @@ LOW_FLIGHT_GRAPH = {"graph_weights": "hessian", "loop_kernel": "huber", "motion_
 # the weak direction: 30 iterations left it short of its minimum. Both, on three lidar noise seeds each (ATE
 # optimised, m): the sparse tile at 150 m 35.8, 1.30, 0.74 -> 0.71, 0.35, 0.44; at 200 m 0.98, 0.78, 8.75 ->
 # 0.22, 0.29, 0.25; Autzen at 150 m 0.96, 1.68, 0.84 -> 0.55, 0.55, 0.49; each alone helped less.
-LOW_FLIGHT_ICP = {"icp_max_iterations": 100}
+LOW_FLIGHT_ICP_ITERATIONS = 100
 LOW_FLIGHT_INFORMATION = "plane"
 # A true loop edge's surface RMSE comes from how the two scans sample the ground: rows of rays 0.2 deg apart,
 # so it shrinks with the height (0.26-0.39 m at the reference's 600 m, 0.02-0.13 m on Autzen 150 m above the
@@ -218,7 +218,7 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
         )
         wanted[("pose_graph", "edges_back")] = (1, "the local map already holds the scans the edges back would measure")
         wanted[("registration", "icp_max_iterations")] = (
-            LOW_FLIGHT_ICP["icp_max_iterations"],
+            LOW_FLIGHT_ICP_ITERATIONS,
             "ICP onto the local map crawls along the track where the ground pins it loosely: 30 iterations "
             "stopped short of its minimum",
         )

@@ -324,10 +324,10 @@ def test_steps_over_a_lake_keep_their_length():
     scans = list(range(70, 130))
     result = run_odometry([data.scans[k] for k in scans], data.poses[scans[0]], config)
     truth = np.linalg.inv(data.poses[scans[:-1]]) @ data.poses[scans[1:]]
-    true_m = np.linalg.norm(truth[:, :3, 3], axis=1)
-    estimated_m = np.linalg.norm(np.asarray(result.relative)[:, :3, 3], axis=1)
-    errors_m = np.linalg.norm(np.asarray(result.relative)[:, :3, 3] - truth[:, :3, 3], axis=1)
-    # a step over water follows the momentum, which wanders: within 0.6 m (0.4 here, 0.5 on seeds 0, 2 and 3),
+    steps = np.asarray(result.relative)[:, :3, 3]
+    true_m, estimated_m = np.linalg.norm(truth[:, :3, 3], axis=1), np.linalg.norm(steps, axis=1)
+    errors_m = np.linalg.norm(steps - truth[:, :3, 3], axis=1)
+    # a step over water follows the momentum, which wanders: within 0.75 m (0.4 here, 0.5 on seeds 0, 2 and 3),
     # and the 120 m keep their length within 3 % (0.2 % here; seed 3 ran 2 % long)
     assert errors_m.max() < 0.75, np.round(estimated_m - true_m, 2)
     assert abs(np.mean(estimated_m / true_m) - 1.0) < 0.03, np.round(estimated_m - true_m, 2)
