@@ -39,10 +39,10 @@ import helpers.registration as registration
 from helpers import create_dataset
 from helpers.config import Config, SensorConfig
 from helpers.errors import SlamError
-from helpers.features import match_features
 from helpers.fit4dof import fit_yaw, fit_yaw_translation, yaw_transform
 from helpers.fitting import fit_to_flight, flight_of
 from helpers.icp import refine_icp
+from helpers.matching import match_features
 from helpers.odometry import describe, prepare
 from helpers.registration import trials_needed
 

@@ -28,10 +28,11 @@ import numpy as np
 
 from .config import Config
 from .errors import SlamError
-from .features import grid_average, keypoint_fpfh, match_features
+from .features import grid_average, keypoint_fpfh
 from .geometry import check_points
 from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
 from .icp_service import IcpService
+from .matching import match_features
 from .motion_guard import BETTER_PAIRED, SAME_MOTION, beyond, clearly_better, offset, with_momentum
 from .overlap import overlap_icp
 from .registration import robust_fit
@@ -164,7 +165,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
 
 
 def gate(moving: Frame, fixed: Frame, config: Config, guess: np.ndarray | None):
-    """The matcher's gate in space for one step (``near`` of :func:`helpers.features.match_features`),
+    """The matcher's gate in space for one step (``near`` of :func:`helpers.matching.match_features`),
     or None: no last motion ``guess``, or ``[features] match_gate = 0``.
 
     A drone does not jump or spin between scans, so a moving point lands near

@@ -51,8 +51,8 @@ MUTANTS = {
         "            self.blind.append(False)\n",
     ),
     "the matcher's gate reaches only its own cell": (
-        "tests/test_features.py",
-        "helpers/features.py",
+        "tests/test_matching.py",
+        "helpers/matching.py",
         "        around = [by_cell.get((cx + dx, cy + dy)) for dx in (-1, 0, 1) for dy in (-1, 0, 1)]\n",
         "        around = [by_cell.get((cx, cy))]\n",
     ),
