@@ -1,7 +1,7 @@
 """Whole flights on ground the parameters were not tuned on: accuracy, loops, the trust flag and time.
 
     nice -n 10 .venv/bin/python benchmarks/bench_flights.py [--flights default seed11-700 sparse-150 ...]
-        [--laps 2] [--swing 0.3] [--seeds 0 1 2] [--set pose_graph.graph_weights=icp ...] [--map-error]
+        [--laps 2] [--swing 0.3] [--seeds 0 1 2] [--set pose_graph.graph_weights=icp ...] [--map-error] [--gnss 2]
 
 Each flight is run as ``python -m helpers run`` runs it (parameters fitted to
 the flight by :func:`helpers.fitting.fit_to_flight`), in a fresh process of
@@ -19,7 +19,8 @@ flight (one period a lap); ``--set table.key=value`` overrides a configuration
 value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted value);
 ``--seeds`` flies each flight once per lidar noise seed (``[sensor] seed``; the
 low flights move by tens of percent from one seed to the next, so compare
-variants on several).
+variants on several); ``--gnss SIGMA`` adds a simulated GNSS fix at every scan
+(``helpers.gnss.simulate_gnss``, sigma SIGMA m on each axis) to the pose graph.
 The table prints ATE (odometry -> optimised), the one-step RPE, the mean ratio of
 estimated to true step length, loops (false), the steps whose gated match was
 redone without the gate (``[features] match_gate``), whether the run calls itself
@@ -49,8 +50,14 @@ from helpers.evaluation import map_errors, run_metrics
 from helpers.pipeline import run_slam
 options = json.loads(sys.argv[1])
 data, config = build_flight(options)
+gnss = None
+if options["gnss"]:  # a fix at every scan, the simulator's noise (seeded by the lidar noise seed), its sigma told
+    from helpers.gnss import GnssFixes, simulate_gnss
+    sigma = options["gnss"]
+    fixes = simulate_gnss(data.poses[:, :3, 3], sigma, sigma, options["seed"])
+    gnss = GnssFixes(np.arange(len(data)), fixes, np.full(3, sigma))
 start = time.perf_counter()
-result = run_slam(data, config)
+result = run_slam(data, config, gnss=gnss)
 seconds = time.perf_counter() - start
 error = map_errors(result.map_points, data.map_points) if options["map_error"] else None
 m = run_metrics(data, result, error)
@@ -185,6 +192,9 @@ def main() -> None:
     )
     parser.add_argument("--seeds", type=int, nargs="+", default=[0], help="lidar noise seeds (default 0)")
     parser.add_argument("--map-error", action="store_true", help="also the median map error (slower)")
+    parser.add_argument(
+        "--gnss", type=float, default=0.0, metavar="SIGMA", help="a GNSS fix at every scan, SIGMA m on x, y and z"
+    )
     args = parser.parse_args()
     from helpers.config import Config
     from helpers.errors import SlamError
@@ -198,7 +208,7 @@ def main() -> None:
           f"{'ungated':>7} {'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
     for name, seed in [(name, seed) for name in args.flights for seed in args.seeds]:
         options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error,
-                   "seed": seed}  # fmt: skip
+                   "seed": seed, "gnss": args.gnss}  # fmt: skip
         label = name if args.seeds == [0] else f"{name}/{seed}"
         out = subprocess.run(
             [sys.executable, "-c", CHILD, json.dumps(options), str(HERE)], capture_output=True, text=True, env=env

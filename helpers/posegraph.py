@@ -166,19 +166,9 @@ class PoseGraph:
         anchor = np.eye(4) if anchor_pose is None else check_pose(anchor_pose, "the anchor pose")
         if int(max_iterations) != max_iterations or max_iterations < 1:
             raise SlamError(f"max_iterations must be a positive integer, got {max_iterations!r}")
-        context = FactorContext(loop_noise=loop_noise_factory(loop_kernel, kernel_scale))
+        # 1-2. the prior holding the first node at the anchor, then every factor in the order added
+        graph, loop_factors = self._to_gtsam(anchor, loop_kernel, kernel_scale)
         self._check_connected()
-
-        # 1. graph, with the prior holding the first node at the anchor
-        graph = gtsam.NonlinearFactorGraph()
-        graph.add(PriorFactor(0, anchor).to_gtsam(context))
-        # 2. every factor, in the order added (odometry edges, edges back, loops, ...)
-        loop_factors = []
-        for factor in self.factors:
-            added = factor.to_gtsam(context)
-            graph.add(added)
-            if isinstance(factor, LoopFactor):
-                loop_factors.append(added)
         # 3. initial values, moved so that node 0 is at the anchor
         start = anchor @ np.linalg.inv(self._poses[0]) @ self.initial_poses
         initial = gtsam.Values()
@@ -206,6 +196,43 @@ class PoseGraph:
         poses = np.array([result.atPose3(k).matrix() for k in range(self.num_nodes)])
         report = _loop_report(loop_factors, result)
         return OptimizationResult(poses, start, before, after, optimizer.iterations(), *report)
+
+    def position_sigmas(
+        self, poses: np.ndarray, anchor_pose: np.ndarray, loop_kernel: str = "none", kernel_scale: float | None = None
+    ) -> np.ndarray:
+        """(K,) how sure the graph is of each node's position, in metres: the square root of the trace of
+        the node's marginal position covariance (``gtsam.Marginals``), the graph linearised at ``poses``
+        (K x 4 x 4, its optimised poses) with the first node held at ``anchor_pose`` as :meth:`optimize`
+        holds it. Near the anchor it is small; along a chain of odometry edges it grows with their
+        noise; absolute factors (GNSS fixes) keep it near their own sigmas everywhere."""
+        poses = np.asarray(poses, dtype=float)
+        if poses.shape != (self.num_nodes, 4, 4):
+            raise SlamError(f"position_sigmas needs {self.num_nodes} poses (4 x 4), got an array of {poses.shape}")
+        graph, _ = self._to_gtsam(check_pose(anchor_pose, "the anchor pose"), loop_kernel, kernel_scale)
+        self._check_connected()
+        values = gtsam.Values()
+        for k, pose in enumerate(poses):
+            values.insert(k, pose3(pose))
+        try:
+            marginals = gtsam.Marginals(graph, values)
+        except RuntimeError as exc:
+            raise SlamError(f"GTSAM could not compute the pose graph's marginals: {exc}") from None
+        # a Pose3's covariance is rotation first; its translation block's trace is the same in any frame
+        return np.array([np.sqrt(np.trace(marginals.marginalCovariance(k)[3:, 3:])) for k in range(self.num_nodes)])
+
+    def _to_gtsam(self, anchor: np.ndarray, loop_kernel: str, kernel_scale: float | None):
+        """GTSAM's factor graph: a prior holding node 0 at ``anchor``, then every factor in the order added,
+        loop edges wrapped in ``loop_kernel``; and the loop edges' GTSAM factors."""
+        context = FactorContext(loop_noise=loop_noise_factory(loop_kernel, kernel_scale))
+        graph = gtsam.NonlinearFactorGraph()
+        graph.add(PriorFactor(0, anchor).to_gtsam(context))
+        loop_factors = []
+        for factor in self.factors:
+            added = factor.to_gtsam(context)
+            graph.add(added)
+            if isinstance(factor, LoopFactor):
+                loop_factors.append(added)
+        return graph, loop_factors
 
     def _loops(self) -> list[LoopFactor]:
         return [f for f in self.factors if isinstance(f, LoopFactor)]

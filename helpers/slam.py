@@ -87,6 +87,7 @@ class SlamResult:
     runtime_s: dict = field(default_factory=dict)
     edges_back_tried: int = 0  # registrations to older scans attempted (``extra_edges`` holds those kept)
     n_gnss_fixes: int = 0  # GNSS factors in the graph (none: the graph is build_pose_graph's of the run's edges)
+    gnss_factors: list = field(default_factory=list)  # those factors (helpers.factors.PositionFactor), in order
 
     @property
     def loops(self) -> list[Edge]:
@@ -285,6 +286,7 @@ class Slam:
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
             n_gnss_fixes=len(fixes),
+            gnss_factors=list(fixes),
         )
 
 

@@ -11,6 +11,7 @@ from helpers.gnss import GnssFixes
 from helpers.health import (
     CORRECTION_FLOOR_M,
     FALSE_LOOP_SIGMAS,
+    GNSS_MAX_EXPECTED_ATE_M,
     WEAK_SIGMA_M,
     _optimized,
     _rebuilt,
@@ -69,6 +70,7 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
         extra_edges=list(extra),
         edges_back_tried=len(extra),
         n_gnss_fixes=len(fixes),
+        gnss_factors=list(fixes),
     )
 
 
@@ -190,3 +192,29 @@ def test_the_runs_own_graph_is_reused_only_where_it_is_the_rebuilt_one():
     rebuilt = _rebuilt(run)
     np.testing.assert_array_equal(rebuilt, _optimized(run, run.loops))
     assert np.abs(rebuilt[:, 1, 3] - run.graph.poses[:, 1, 3]).max() > 1.0  # the fixes' pull is left out
+
+
+def _fixes(sigma):
+    """A GNSS fix of ``sigma`` m on x, y and z at every node, on the true positions."""
+    positions = np.array([[2.0 * k, 0.0, 0.0] for k in range(NODES)])
+    return GnssFixes(np.arange(NODES) * 3, positions, np.full(3, sigma)).factors(np.arange(NODES) * 3)
+
+
+def test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing():
+    """Every step on ground too flat to pin it, each known only to 1 m: untrusted on lidar alone. With a
+    0.3 m fix at every node the graph expects its trajectory well within the bar, and says why it may."""
+    weak = {"informations": [_info(1.0)] * (NODES - 1), "constraint": 0.0}
+    alone = assess(_run(**weak))
+    assert not alone.trusted and alone.counts["expected_ate_m"] is None
+    held = assess(_run(**weak, fixes=_fixes(0.3)))
+    assert held.trusted, held.problems
+    # 30 fixes of 0.3 m, each fused with steps of 1 m: each node's sigma is a little under the fix's sqrt(3) 0.3
+    assert 0.2 < held.counts["expected_ate_m"] < np.sqrt(3) * 0.3
+    assert held.counts["n_weak_steps"] == NODES - 1  # still counted, no longer held against the run
+
+
+def test_gnss_fixes_too_loose_for_the_steps_leave_a_run_untrusted():
+    """The same weak steps with 3 m fixes: the graph expects metres, and the run says so, naming GNSS."""
+    health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(3.0)))
+    assert health.counts["expected_ate_m"] > GNSS_MAX_EXPECTED_ATE_M
+    assert not health.trusted and len(health.problems) == 1 and "GNSS fixes" in health.problems[0]

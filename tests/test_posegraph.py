@@ -233,3 +233,28 @@ def test_a_new_factor_kind_is_honoured_without_editing_the_graph():
     np.testing.assert_allclose(pulled[:3, 3], truth[-1][:3, 3] + [5.0, 0, 0], atol=0.01)
     with pytest.raises(SlamError, match="does not exist"):
         graph.add_factor(PositionFix(len(truth), truth[0][:3, 3], 1.0))
+
+
+def test_position_sigmas_add_up_along_a_chain_and_meet_a_fix_as_gaussians_do():
+    """A straight chain of 2 m steps, each known to 0.1 m on every axis and to a micro-radian in rotation, from
+    an anchored first node: node k's position variance is 3 k 0.1² (three axes). A 0.3 m fix on the last node
+    fuses with it as two Gaussians do, axis by axis."""
+    from helpers.factors import PositionFactor
+
+    sigma, fix_sigma, n = 0.1, 0.3, 12
+    step_sigmas = [sigma] * 3 + [1e-6] * 3
+    graph = PoseGraph()
+    graph.add_node(np.eye(4))
+    for _ in range(n):
+        graph.append(pose(t=(2, 0, 0)), sigmas=step_sigmas)
+    poses = graph.optimize().poses
+    chain = graph.position_sigmas(poses, np.eye(4))
+    np.testing.assert_allclose(chain[1:], sigma * np.sqrt(3 * np.arange(1, n + 1)), rtol=1e-3)
+    assert chain[0] < 1e-3  # the anchor
+    graph.add_factor(PositionFactor(n, poses[n, :3, 3], np.full(3, fix_sigma)))
+    fused = graph.position_sigmas(poses, np.eye(4))
+    per_axis = 1.0 / (1.0 / (n * sigma**2) + 1.0 / fix_sigma**2)
+    np.testing.assert_allclose(fused[n], np.sqrt(3 * per_axis), rtol=1e-3)
+    assert fused[n] < min(chain[n], np.sqrt(3) * fix_sigma)
+    with pytest.raises(SlamError, match="poses"):
+        graph.position_sigmas(poses[:-1], np.eye(4))
