@@ -14,7 +14,7 @@ A run is *not trusted* when
   ICP's ``constraint`` below :data:`WEAK_CONSTRAINT` (:func:`helpers.icp.pairing`:
   on a plane, generalized ICP's Hessian still counts the distances along the
   plane its covariances allow, so both are read), or
-- a loop edge ends more than :data:`FALSE_LOOP_SIGMAS` from where the rest
+- a loop edge ends more than :data:`helpers.graph_measures.FALSE_LOOP_SIGMAS` from where the rest
   of the graph puts it, whitened by its own calibrated information (the
   graph's sigmas when it has none), and farther than a false loop is off
   the truth (:func:`helpers.evaluation.is_false_loop`): a false loop, and
@@ -34,7 +34,7 @@ longer stays in the map: the fixes hold every node near where they put it.
 The four rules that read drift (steps that fell back, steps on flat ground,
 revisits with no loop, what the loops moved) then give way to one that asks
 the graph itself: the ATE it expects of its own trajectory
-(:func:`expected_ate`, from its marginal covariances) must be at most
+(:func:`helpers.graph_measures.expected_ate`, from its marginal covariances) must be at most
 :data:`GNSS_MAX_EXPECTED_ATE_M`. A loose receiver, a sparse one or steps
 whose information says they pinned nothing widen it.
 """
@@ -43,20 +43,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-import gtsam
 import numpy as np
 
-from .factors import pose3
+from .graph_measures import (
+    FALSE_LOOP_SIGMAS,
+    expected_ate,
+    loop_correction,
+    loop_pull,
+    loops_against_graph,
+    rebuilt_poses,
+    revisits,
+)
 from .icp import WEAK_CONSTRAINT
-from .information import TRANSLATION_FIRST, weakest, whitened
-from .loopclosure import radius_after
+from .information import weakest
 from .sensor import index_ranges
 
 MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
-LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many (fixed) radii away
-FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation disagrees with the graph
-# (true loops end within a few sigmas of where the graph puts them, false ones far beyond: the benchmarks on the
-# default flight and on Autzen measure both)
 MAX_CORRECTION_SHARE = 0.01  # loops moving a pose by more than this share of the distance flown: weak odometry
 # (on good odometry the loops move the trajectory by a fraction of this; beyond it the trajectory stays off the
 # truth between the places where loops closed)
@@ -111,9 +113,9 @@ def assess(result) -> Health:
     weak = result.indices[1:][(odometry.constraint < WEAK_CONSTRAINT) | (sigmas > WEAK_SIGMA_M)]
     positions = odometry.poses[:, :3, 3]
     flown_to = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
-    revisits, unclosed = _revisits(result, flown_to)
+    revisited, unclosed = revisits(result, flown_to)
     flown = float(flown_to[-1])
-    rebuilt = _rebuilt(result) if result.loops else None  # both measures start from it
+    rebuilt = rebuilt_poses(result) if result.loops else None  # both measures start from it
     held = bool(getattr(result, "gnss_factors", None))  # GNSS fixes hold every node: drift stays out of the map
     expected = expected_ate(result) if held else None
     correction = loop_correction(result, rebuilt)
@@ -133,7 +135,7 @@ def assess(result) -> Health:
         "loops_against_graph_pull_m": round(pull, 3),
         "n_edges_back_tried": result.edges_back_tried,
         "n_edges_back_left_out": result.edges_back_tried - len(result.extra_edges),
-        "n_revisits": revisits,
+        "n_revisits": revisited,
         "n_revisits_unclosed": unclosed,
         "largest_correction_m": round(correction, 3),
         "weakest_step_sigma_m": round(float(np.nanmax(sigmas)), 3) if np.isfinite(sigmas).any() else None,
@@ -186,10 +188,10 @@ def assess(result) -> Health:
             "If false, the likely cause is repetitive or flat ground that matches within the loop thresholds: try "
             f"a lower [loop_closure] rmse_threshold (now {loops.rmse_threshold} m)."
         )
-    if not held and revisits >= config.map.n_scans_per_submap and unclosed > revisits / 2:
+    if not held and revisited >= config.map.n_scans_per_submap and unclosed > revisited / 2:
         needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
         problems.append(
-            f"{revisits} accepted scans come back over ground flown earlier, and {unclosed} of them closed no "
+            f"{revisited} accepted scans come back over ground flown earlier, and {unclosed} of them closed no "
             "loop, so the drift stays in the map. Likely cause: a loop candidate must be older than "
             f"[loop_closure] sub_map_thresh = {loops.sub_map_thresh} submaps (about {needed} accepted scans), "
             "or the scans do not match within loop_closure_threshold. Try a smaller sub_map_thresh."
@@ -213,25 +215,6 @@ def assess(result) -> Health:
     return Health(counts, problems)
 
 
-def expected_ate(result) -> float:
-    """The ATE (m) the run's graph expects of its own trajectory: the root mean square, over its nodes, of
-    each node's position sigma (:meth:`helpers.posegraph.PoseGraph.position_sigmas`), in the graph the run
-    optimised (its edges, loops and GNSS fixes, the first node held where the run held it) at the optimised
-    poses. It is as honest as the edges' information: with calibrated information and a fix at every scan
-    the ATE was 0.9-1.35 times it on six low flights, four with 2 m fixes and two with 10 m ones (the
-    README's "Your own data")."""
-    from .slam import build_pose_graph  # the run's own graph
-
-    config = result.config
-    graph = build_pose_graph(result.odometry, result.extra_edges, result.loops, config)
-    for fix in getattr(result, "gnss_factors", None) or []:
-        graph.add_factor(fix)
-    sigmas = graph.position_sigmas(
-        result.graph.poses, result.graph.initial_poses[0], loop_kernel=config.pose_graph.loop_kernel
-    )
-    return float(np.sqrt(np.mean(sigmas**2)))
-
-
 def weak_sigmas(odometry) -> np.ndarray:
     """(K-1,) sigma (m) of each odometry step along the direction it pins least (nan: no information)."""
     informations = getattr(odometry, "information", None) or [None] * len(odometry.relative)
@@ -240,102 +223,7 @@ def weak_sigmas(odometry) -> np.ndarray:
     return np.array([np.nan if info is None else weakest(info)[0] for info in informations], dtype=float)
 
 
-def loop_correction(result, rebuilt=None) -> float:
-    """How far (m) the loop edges moved any pose: the run's graph against the same graph without them, both
-    rebuilt from the run's edges (as :func:`loop_pull`: GNSS fixes in the run's own graph move it too, and
-    that is not the loops' doing). ``rebuilt``: the run's graph's poses so rebuilt, if already computed."""
-    if not result.loops:
-        return 0.0
-    rebuilt = _rebuilt(result) if rebuilt is None else rebuilt
-    return _moved(rebuilt, _optimized(result, []))
-
-
-def loop_pull(result, suspects, rebuilt=None) -> float:
-    """How far (m) the loop edges ``suspects`` still move any pose: the run's graph against the same graph
-    without them, both rebuilt from the run's edges (the run's own graph may hold GNSS fixes, whose pull is
-    not the suspects'). A false loop that a robust kernel set aside pulls by millimetres to centimetres; one
-    it could not, or with no kernel, by metres. ``rebuilt`` as for :func:`loop_correction`."""
-    if not suspects:
-        return 0.0
-    kept = [loop for loop in result.loops if not any(loop is suspect for suspect in suspects)]
-    rebuilt = _rebuilt(result) if rebuilt is None else rebuilt
-    return _moved(rebuilt, _optimized(result, kept))
-
-
-def _rebuilt(result) -> np.ndarray:
-    """(N, 4, 4) poses of the run's graph rebuilt from its edges (GNSS fixes left out). Without fixes, and
-    anchored where the odometry starts, that is the run's own graph optimised from the same start: its
-    poses are taken as they are (the same bits on every flight measured), which saves a whole
-    optimisation (1.2-1.7 s on the 570-620-node tile flights)."""
-    anchored = np.allclose(result.graph.initial_poses[0], result.odometry.poses[0], rtol=0.0, atol=1e-9)
-    if getattr(result, "n_gnss_fixes", 0) == 0 and anchored:
-        return result.graph.poses
-    return _optimized(result, result.loops)
-
-
-def _optimized(result, loops) -> np.ndarray:
-    """(N, 4, 4) poses of the run's graph with only ``loops`` as its loop edges, optimised as the run was."""
-    from .slam import build_pose_graph  # the run's own graph
-
-    config = result.config
-    graph = build_pose_graph(result.odometry, result.extra_edges, loops, config)
-    return graph.optimize(anchor_pose=result.odometry.poses[0], loop_kernel=config.pose_graph.loop_kernel).poses
-
-
-def _moved(poses: np.ndarray, other: np.ndarray) -> float:
-    """The largest distance (m) between the positions of two trajectories of the same nodes."""
-    return float(np.linalg.norm(poses[:, :3, 3] - other[:, :3, 3], axis=1).max())
-
-
-def loop_residuals(result) -> list[tuple[float, float, float]]:
-    """Per loop edge: how far the optimised graph leaves it, (m, deg, sigmas). The sigmas whiten the
-    residual by the edge's own calibrated information, or are the graph's when it has none."""
-    poses, out = result.graph.poses, []
-    for k, loop in enumerate(result.loops):
-        estimate = np.linalg.inv(poses[loop.i]) @ poses[loop.j]
-        xi = np.asarray(gtsam.Pose3.Logmap(pose3(np.linalg.inv(loop.relative) @ estimate)))[TRANSLATION_FIRST]
-        info = getattr(loop, "information", None)
-        norm = whitened(xi, info) if info is not None else float(result.graph.loop_whitened_norm[k])
-        out.append((float(np.linalg.norm(xi[:3])), float(np.degrees(np.linalg.norm(xi[3:]))), norm))
-    return out
-
-
-def loops_against_graph(result) -> list:
-    """The loop edges the rest of the graph disagrees with: beyond :data:`FALSE_LOOP_SIGMAS` and farther
-    off than a false loop (:func:`helpers.evaluation.is_false_loop`, the graph taken for the truth)."""
-    from .evaluation import is_false_loop  # evaluation reads this module
-
-    residuals = loop_residuals(result)
-    return [
-        loop
-        for loop, (metres, degrees, sigmas) in zip(result.loops, residuals, strict=True)
-        if sigmas > FALSE_LOOP_SIGMAS and is_false_loop(metres, degrees)
-    ]
-
-
 def _some(indices, shown: int = 6) -> str:
     """The first ``shown`` runs of ``indices``, as :func:`helpers.sensor.index_ranges` writes them."""
     runs = index_ranges(np.asarray(indices)).split(", ")
     return ", ".join(runs) if len(runs) <= shown else ", ".join(runs[:shown]) + ", ..."
-
-
-def _revisits(result, flown: np.ndarray) -> tuple[int, int]:
-    """Nodes whose odometry position comes back within the loop search radius
-    (the loop closer's, :func:`helpers.loopclosure.radius_after`) of a node
-    left more than ``LEFT_FACTOR`` fixed radii of flight earlier (revisits),
-    and how many of them have no loop edge within that many radii of flight.
-    ``flown``: the distance flown to each node, along the odometry."""
-    positions = result.odometry.poses[:, :3, 3]
-    if len(positions) < 3:
-        return 0, 0
-    settings = result.config.loop_closure
-    since = flown[:, None] - flown[None, :]  # row k flew that far since column i
-    reach = radius_after(np.abs(since), settings)  # the loop closer's search radius between each pair
-    near = np.linalg.norm(positions[:, None, :2] - positions[None, :, :2], axis=2) < reach
-    radius = radius_after(0.0, settings)  # around a place just left: the fixed radius
-    left = since > LEFT_FACTOR * radius
-    revisit = (near & left).any(axis=1)
-    closed = np.zeros(len(positions), bool)
-    for loop in result.loops:
-        closed |= np.abs(flown - flown[loop.j]) <= LEFT_FACTOR * radius
-    return int(revisit.sum()), int((revisit & ~closed).sum())

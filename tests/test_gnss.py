@@ -196,7 +196,7 @@ def test_gnss_of_2_m_brings_a_low_flight_well_under_2_m(tmp_path):
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["ate_rmse_odometry_m"] > 1.0
     assert metrics["ate_rmse_optimized_m"] < 0.5
-    # the run judges itself by the ATE its graph expects (helpers.health.expected_ate): 0.48 m here against
+    # the run judges itself by the ATE its graph expects (helpers.graph_measures.expected_ate): 0.48 m here against
     # 0.35 m true; the true ATE moves with the machine (0.19-0.35 m) where the expectation hardly does
     expected = metrics["health"]["expected_ate_m"]
     assert expected / 3 < metrics["ate_rmse_optimized_m"] < 3 * expected

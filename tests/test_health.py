@@ -8,16 +8,8 @@ import numpy as np
 from helpers.config import Config
 from helpers.factors import Edge
 from helpers.gnss import GnssFixes
-from helpers.health import (
-    CORRECTION_FLOOR_M,
-    FALSE_LOOP_SIGMAS,
-    GNSS_MAX_EXPECTED_ATE_M,
-    WEAK_SIGMA_M,
-    _optimized,
-    _rebuilt,
-    assess,
-    loop_residuals,
-)
+from helpers.graph_measures import FALSE_LOOP_SIGMAS, loop_residuals, optimized_with, rebuilt_poses
+from helpers.health import CORRECTION_FLOOR_M, GNSS_MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
 from helpers.information import calibrated
 from helpers.odometry import OdometryResult
 from helpers.slam import build_pose_graph
@@ -184,13 +176,13 @@ def test_the_runs_own_graph_is_reused_only_where_it_is_the_rebuilt_one():
     that graph is the run's own, to the bit, so its poses are taken as they are (one optimisation fewer);
     with fixes in the run's graph it is optimised again without them, and differs."""
     run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(1.5, 0.1)])
-    assert _rebuilt(run) is run.graph.poses
-    np.testing.assert_array_equal(_rebuilt(run), _optimized(run, run.loops))
+    assert rebuilt_poses(run) is run.graph.poses
+    np.testing.assert_array_equal(rebuilt_poses(run), optimized_with(run, run.loops))
     positions = np.array([[2.0 * k, 3.0, 0.0] for k in range(NODES)])
     fixes = GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)).factors(np.arange(NODES) * 3)
     run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(1.5, 0.1)], fixes=fixes)
-    rebuilt = _rebuilt(run)
-    np.testing.assert_array_equal(rebuilt, _optimized(run, run.loops))
+    rebuilt = rebuilt_poses(run)
+    np.testing.assert_array_equal(rebuilt, optimized_with(run, run.loops))
     assert np.abs(rebuilt[:, 1, 3] - run.graph.poses[:, 1, 3]).max() > 1.0  # the fixes' pull is left out
 
 

@@ -380,7 +380,7 @@ def test_the_health_report_counts_a_revisit_where_the_loop_closer_would_search()
     far enough; the health report counts those, and none with a fixed radius."""
     from types import SimpleNamespace
 
-    from helpers.health import _revisits
+    from helpers.graph_measures import revisits
     from helpers.loopclosure import radius_after
 
     x = np.arange(0.0, 101.0)
@@ -395,5 +395,5 @@ def test_the_health_report_counts_a_revisit_where_the_loop_closer_would_search()
         back = np.arange(len(x), len(xy))  # the nodes flown back, each 9 m beside its twin on the way out
         since = flown[back] - flown[len(x) - 1 - (back - len(x))]
         expected = np.sum((radius_after(since, settings) > 9.0) & (since > 4 * 7.9))
-        assert _revisits(result, flown) == (expected, expected)
+        assert revisits(result, flown) == (expected, expected)
         assert (expected > 0) == (growth > 0)
