@@ -62,6 +62,12 @@ MUTANTS = {
         "    if near is not None and pair.fallback is not None:\n",
         "    if False:\n",
     ),
+    "the graph's expected ATE leaves the GNSS fixes out": (
+        "tests/test_health.py",
+        "helpers/graph_measures.py",
+        '    for fix in getattr(result, "gnss_factors", None) or []:\n',
+        "    for fix in []:\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",
