@@ -40,19 +40,16 @@ def cell_seconds(cell) -> float:
 
 
 def run(path: Path, environment: dict, sockets: Path) -> list[tuple[int, float, str]]:
-    """(code cell number, seconds, first line) of every code cell of ``path``, executed in a fresh kernel
-    that talks over Unix sockets named after ``sockets`` (as the book's builder's kernels do)."""
+    """(code cell number, seconds, first line) of every code cell of ``path``, executed as the book's builder
+    executes it (:func:`helpers.site.build.execute_notebook`: a fresh kernel over Unix sockets named after
+    ``sockets``) with ``environment`` added to the kernel's."""
     import nbformat
-    from nbclient import NotebookClient
-    from traitlets.config import Config
 
-    from helpers.site.build import KERNEL_LOG  # nbclient's log, without Dash's comm warning
+    from helpers.site.build import execute_notebook
 
     notebook = nbformat.read(path, as_version=4)
-    ipc = Config({"KernelManager": {"transport": "ipc", "ip": str(sockets)}})
     with mock.patch.dict(os.environ, environment):
-        where = {"metadata": {"path": str(path.parent)}}
-        NotebookClient(notebook, timeout=1800, resources=where, config=ipc, log=KERNEL_LOG).execute()
+        execute_notebook(notebook, path, sockets)
     code = [cell for cell in notebook.cells if cell.cell_type == "code"]
     return [(k, cell_seconds(cell), (cell.source.strip().splitlines() or [""])[0][:60]) for k, cell in enumerate(code)]
 
@@ -71,10 +68,8 @@ def main() -> None:
     if missing:
         sys.exit(f"error: no such notebook: {', '.join(missing)}")
 
-    from helpers.viz.display import KERNEL_ENVIRONMENT
-
     with tempfile.TemporaryDirectory(prefix="bench-notebooks-") as scratch:
-        environment = dict(KERNEL_ENVIRONMENT)
+        environment = {}  # the kernel's own (3-D views as pictures) come from execute_notebook
         if not args.warm:
             environment["HELPERS_CACHE"] = str(Path(scratch) / "cache")
         print(f"{'notebook':40} {'cells':>5} {'total s':>8} {'slowest s':>9}")

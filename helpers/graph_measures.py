@@ -27,14 +27,11 @@ def expected_ate(result) -> float:
     poses. It is as honest as the edges' information: with calibrated information and a fix at every scan
     the ATE was 0.9-1.35 times it on six low flights, four with 2 m fixes and two with 10 m ones (the
     README's "Your own data")."""
-    from .slam import build_pose_graph  # the run's own graph
-
-    config = result.config
-    graph = build_pose_graph(result.odometry, result.extra_edges, result.loops, config)
+    graph = _run_graph(result, result.loops)
     for fix in getattr(result, "gnss_factors", None) or []:
         graph.add_factor(fix)
     sigmas = graph.position_sigmas(
-        result.graph.poses, result.graph.initial_poses[0], loop_kernel=config.pose_graph.loop_kernel
+        result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
     )
     return float(np.sqrt(np.mean(sigmas**2)))
 
@@ -67,18 +64,23 @@ def rebuilt_poses(result) -> np.ndarray:
     poses are taken as they are (the same bits on every flight measured), which saves a whole
     optimisation (1.2-1.7 s on the 570-620-node tile flights)."""
     anchored = np.allclose(result.graph.initial_poses[0], result.odometry.poses[0], rtol=0.0, atol=1e-9)
-    if getattr(result, "n_gnss_fixes", 0) == 0 and anchored:
+    if not getattr(result, "gnss_factors", None) and anchored:
         return result.graph.poses
     return optimized_with(result, result.loops)
 
 
 def optimized_with(result, loops) -> np.ndarray:
     """(N, 4, 4) poses of the run's graph with only ``loops`` as its loop edges, optimised as the run was."""
+    graph = _run_graph(result, loops)
+    return graph.optimize(anchor_pose=result.odometry.poses[0], loop_kernel=result.config.pose_graph.loop_kernel).poses
+
+
+def _run_graph(result, loops):
+    """The run's pose graph rebuilt from its edges (:func:`helpers.slam.build_pose_graph`) with ``loops`` as
+    its loop edges and no GNSS fix."""
     from .slam import build_pose_graph  # the run's own graph
 
-    config = result.config
-    graph = build_pose_graph(result.odometry, result.extra_edges, loops, config)
-    return graph.optimize(anchor_pose=result.odometry.poses[0], loop_kernel=config.pose_graph.loop_kernel).poses
+    return build_pose_graph(result.odometry, result.extra_edges, loops, result.config)
 
 
 def _moved(poses: np.ndarray, other: np.ndarray) -> float:

@@ -86,13 +86,17 @@ class SlamResult:
     n_scans: int  # scans in the dataset, accepted or not
     runtime_s: dict = field(default_factory=dict)
     edges_back_tried: int = 0  # registrations to older scans attempted (``extra_edges`` holds those kept)
-    n_gnss_fixes: int = 0  # GNSS factors in the graph (none: the graph is build_pose_graph's of the run's edges)
-    gnss_factors: list = field(default_factory=list)  # those factors (helpers.factors.PositionFactor), in order
+    gnss_factors: list = field(default_factory=list)  # GNSS fixes in the graph (helpers.factors.PositionFactor)
 
     @property
     def loops(self) -> list[Edge]:
         """The accepted loop edges, in the order they were found."""
         return [q.closure for q in self.queries if q.closure is not None]
+
+    @property
+    def n_gnss_fixes(self) -> int:
+        """GNSS factors in the graph (none: the graph is build_pose_graph's of the run's edges)."""
+        return len(self.gnss_factors)
 
     @property
     def poses_odometry(self) -> np.ndarray:
@@ -285,7 +289,6 @@ class Slam:
             n_scans=self.indices[-1] + 1 if n_scans is None else n_scans,
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
-            n_gnss_fixes=len(fixes),
             gnss_factors=list(fixes),
         )
 

@@ -61,7 +61,6 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
         queries=queries,
         extra_edges=list(extra),
         edges_back_tried=len(extra),
-        n_gnss_fixes=len(fixes),
         gnss_factors=list(fixes),
     )
 

@@ -154,12 +154,14 @@ def _add_notebook(path: Path, target: Path, execute: bool, sockets: Path) -> Non
 
     notebook = nbformat.read(path, as_version=4)
     if execute:
-        _execute(notebook, path, sockets)
+        execute_notebook(notebook, path, sockets)
     cells.prepare(notebook)  # folded cells stay folded, a figure cell's other outputs stay out of its figure
     nbformat.write(notebook, target)
 
 
-def _execute(notebook, path: Path, sockets: Path) -> None:
+def execute_notebook(notebook, path: Path, sockets: Path) -> None:
+    """Run every cell of ``notebook`` (read from ``path``, which it runs beside) in a fresh kernel, as the
+    book's notebooks are run; ``benchmarks/bench_notebooks.py`` times them so."""
     from nbclient import NotebookClient
     from traitlets.config import Config
 
