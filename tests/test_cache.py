@@ -75,6 +75,7 @@ def stand_in_run(monkeypatch):
         return {"result": len(runs), "values": np.arange(1000.0)}
 
     monkeypatch.setattr(pipeline, "create_dataset", lambda sensor: "dataset")
+    monkeypatch.setattr(pipeline, "default_config", lambda dataset, config: config)  # no flight to fit to
     monkeypatch.setattr(pipeline, "run_slam", run_slam)
     return runs
 
@@ -134,3 +135,24 @@ def test_default_run_takes_the_dataset_it_would_cast_and_no_other(tmp_path, stan
     with pytest.raises(SlamError, match="the shipped loop"):
         pipeline.default_run(config, dataset=other_flight)
     assert len(stand_in_run) == 1  # only the first call ran (the second read its cache)
+
+
+def test_default_run_without_a_configuration_runs_what_the_cli_runs(monkeypatch):
+    """default_run() fits the defaults to the embedded flight as `python -m helpers run` does: on this flight
+    only the descriptor grid changes (the reference's 1.5 m doubled); a configuration given is run as it is."""
+    from helpers.config import Config
+    from helpers.configfile import load_config
+    from helpers.dataset import create_dataset
+    from helpers.fitting import fit_to_flight, flight_of
+
+    runs = []
+    monkeypatch.setattr(pipeline, "create_dataset", lambda sensor: create_dataset(sensor=sensor, lazy=True))
+    monkeypatch.setattr(pipeline, "run_slam", lambda dataset, config: runs.append(config) or len(runs))
+    dataset, _ = pipeline.default_run()
+    cli = load_config(None)  # what `run` starts from without --config, then fits (helpers.__main__)
+    assert runs == [fit_to_flight(flight_of(dataset), cli)[0]]
+    assert runs[0].features.grid_step == 2 * Config().features.grid_step == 3.0
+    assert runs[0].with_values(features={"grid_step": Config().features.grid_step}) == cli
+    given = Config(sensor=dataset.sensor)
+    pipeline.default_run(given, dataset)
+    assert runs[1] == given

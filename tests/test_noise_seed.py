@@ -35,6 +35,7 @@ def test_the_entry_points_take_the_seed_from_the_environment(monkeypatch, tmp_pa
     assert "seed = 7\n" in (tmp_path / "data" / "sensor.toml").read_text()
     # default_run, with a stand-in dataset and run
     monkeypatch.setattr(pipeline, "create_dataset", lambda sensor: sensor)
+    monkeypatch.setattr(pipeline, "default_config", lambda dataset, config: config)  # no flight to fit to
     monkeypatch.setattr(pipeline, "run_slam", lambda dataset, config: "result")
     assert pipeline.default_run()[0].seed == 7
     assert pipeline.default_run(Config())[0].seed == 0  # a configuration given is taken as it is
