@@ -24,8 +24,9 @@ import numpy as np
 
 from helpers.config import Config
 from helpers.dataset import create_dataset
-from helpers.frames import gate, prepare
+from helpers.frames import gate
 from helpers.matching import _neighbourhoods, match_features
+from helpers.preparation import prepare
 
 
 def compared_share(moving_xy: np.ndarray, fixed_xy: np.ndarray, cell: float) -> float:

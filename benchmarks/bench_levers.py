@@ -14,11 +14,11 @@ yaw-and-translation one, ``robust_fit = "msac4"``):
 
 Each lever runs the odometry of the default flight's first ``--scans`` accepted scans in a fresh process,
 once per ``--blas`` thread count (``OPENBLAS_NUM_THREADS`` of that process: numpy's BLAS, which the
-robust fit uses; the descriptor matcher holds it to one thread itself, ``helpers.features.BLAS``, so
+robust fit uses; the descriptor matcher holds it to one thread itself, ``helpers.threads.BLAS``, so
 the count no longer reaches the matching column). Open3D and small_gicp run on ``OMP_NUM_THREADS`` (1
-unless set). Stage times are process CPU times (every thread's), taken where :mod:`helpers.frames` takes
-its wall times, so a busy machine slows them less than wall times; the wall time per scan is printed
-beside them.
+unless set). Stage times are process CPU times (every thread's), taken where :mod:`helpers.preparation`
+and :mod:`helpers.frames` take their wall times, so a busy machine slows them less than wall times; the
+wall time per scan is printed beside them.
 
 Per lever: CPU ms per accepted scan (mean) of FPFH (normals and descriptors), matching, the robust fit and
 ICP (downsampling and ICP's cloud preparation included), their total and the wall ms; the coarse fit's
@@ -54,12 +54,13 @@ def child(options: dict) -> dict:
     from bench_flights import with_settings
 
     import helpers.frames as frames
+    import helpers.preparation as preparation
     from helpers import create_dataset
     from helpers.config import Config
     from helpers.metrics import ate, rpe
     from helpers.odometry import STAGES, Odometry, accepted_indices, prepare
 
-    frames.time = SimpleNamespace(perf_counter=time.process_time)  # the stages' clocks read CPU time
+    frames.time = preparation.time = SimpleNamespace(perf_counter=time.process_time)  # the stages' clocks read CPU
     config = with_settings(Config(), options["set"])
     data = create_dataset(lazy=True)
     indices = accepted_indices(len(data), config)[: options["scans"]]

@@ -50,10 +50,10 @@ import numpy as np
 import helpers
 from helpers.config import Config
 from helpers.fitting import DESCRIPTOR_GRID_FACTOR
-from helpers.frames import prepare as prepare_frame
 from helpers.icp import refine_icp
 from helpers.metrics import ate
 from helpers.odometry import run_odometry
+from helpers.preparation import prepare as prepare_frame
 
 VOXEL = 1.5  # m, Open3D's recipe (the reference's gridStep)
 

@@ -1,10 +1,7 @@
-"""One scan prepared for registration, and one pair of scans registered (stage 3c).
+"""One pair of prepared scans registered (stage 3c).
 
-:func:`prepare` downsamples a scan on the feature grid and on the ICP grid
-(once each), describes it (FPFH, :func:`describe`) and makes its ICP cloud
-ready (normals and generalized-ICP covariances); that preparation serves
-twice, as the moving scan of one pair and the fixed scan of the next.
-:func:`register_frames` matches descriptors, fits a transform robustly
+Each scan comes prepared once (:mod:`helpers.preparation`: its clouds, its
+descriptors, its ICP cloud). :func:`register_frames` matches descriptors, fits a transform robustly
 (MSAC, rigid or yaw and translation: ``[registration] robust_fit``) and
 refines it by ICP, the flight's last motion guarding each step
 (:mod:`helpers.motion_guard`); :func:`track_frames` runs ICP alone from the
@@ -28,32 +25,16 @@ import numpy as np
 
 from .config import Config
 from .errors import SlamError
-from .features import grid_average, keypoint_fpfh
 from .geometry import check_points
-from .icp import WEAK_CONSTRAINT, IcpCloud, icp_cloud, pairing
+from .icp import WEAK_CONSTRAINT, pairing
 from .icp_service import IcpService
 from .matching import match_features
 from .motion_guard import BETTER_PAIRED, SAME_MOTION, beyond, clearly_better, offset, with_momentum
 from .overlap import overlap_icp
+from .preparation import Frame, describe, prepare
 from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
-
-
-@dataclass
-class Frame:
-    """One scan, prepared for registration."""
-
-    points: np.ndarray  # (N, 3) grid-averaged on grid_step: where the descriptors are
-    features: np.ndarray | None  # (K, 33) normalised FPFH descriptors of the keypoints (None until :func:`describe`)
-    icp_points: np.ndarray  # (M, 3) the cloud ICP works on
-    timings: dict  # ms per preparation stage
-    icp: IcpCloud | None = None  # icp_points made ready for the configured ICP metric, once
-    keypoints: np.ndarray | None = None  # (K,) indices of the points that have descriptors (None: all)
-
-    def described(self) -> np.ndarray:
-        """Indices of the points that have descriptors, ascending."""
-        return np.arange(len(self.points)) if self.keypoints is None else self.keypoints
 
 
 @dataclass
@@ -78,53 +59,6 @@ class PairRegistration:
         """Whether this step measured nothing: ICP started from ``motion`` (the last motion) on ground too flat
         to move it (no fit, or the fit doubted)."""
         return bool(self.constraint < WEAK_CONSTRAINT and np.allclose(self.T_coarse, motion))
-
-
-def prepare(scan: np.ndarray, config: Config) -> Frame:
-    """Downsample one scan, describe it (not yet in tracking mode: see
-    :func:`describe`) and make its ICP cloud ready.
-
-    ``timings`` has the ms of ``downsample``, ``fpfh`` and ``icp`` (the ICP
-    cloud's normals, covariances and k-d tree, paid once per scan).
-    """
-    registration = config.registration
-    timings = {}
-    start = time.perf_counter()
-    points = grid_average(scan, config.features.grid_step)
-    icp_step = registration.icp_grid_step
-    icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
-    timings["downsample"] = _ms(start)
-    start = time.perf_counter()
-    icp = icp_cloud(icp_points, registration.metric, registration.icp_backend)
-    timings["icp"] = _ms(start)
-    frame = Frame(points, None, icp_points, timings, icp)
-    return frame if registration.mode == "tracking" else describe(frame, config)
-
-
-def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame:
-    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`prepare`)."""
-    return prepare(check_points(scan, f"scan {index}"), config)
-
-
-def reads_ahead(config: Config) -> bool:
-    """Whether a run prepares the next scan in a thread while it registers this one
-    (:func:`helpers.pipeline.run_slam`, :func:`helpers.odometry.run_odometry`): in global mode,
-    where FPFH, which lets go of Python's lock, is most of :func:`prepare` (the default flight's
-    odometry 116 → 110 ms a scan on its 1.5 m grid, 67 → 62 on 3 m, the same bits). In tracking
-    mode the preparation is small_gicp's ICP cloud, and its align holds the lock: the thread cost
-    2 ms a scan (31 against 33), so there each scan is prepared when its turn comes."""
-    return config.registration.mode == "global"
-
-
-def describe(frame: Frame, config: Config) -> Frame:
-    """Give ``frame`` its FPFH descriptors and keypoints, once."""
-    if frame.features is None:
-        start = time.perf_counter()
-        frame.keypoints, frame.features = keypoint_fpfh(
-            frame.points, config.features.neighbors, config.features.keypoint_share
-        )
-        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
-    return frame
 
 
 def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray, icp: IcpService | None = None):

@@ -1,8 +1,9 @@
 """Stage 3c: lidar odometry, scan to scan, as the reference's registration loop.
 
 Every ``skip_frames``-th scan is *accepted*. Each accepted scan is registered
-to the previous one (:mod:`helpers.frames`: grid-average downsampling, FPFH
-descriptors, descriptor matching, a robust rigid fit and an ICP
+to the previous one, each prepared once (:mod:`helpers.preparation`:
+grid-average downsampling, FPFH descriptors, the ICP cloud) and registered
+(:mod:`helpers.frames`: descriptor matching, a robust fit and an ICP
 refinement). Chaining the relative transforms from the first pose gives the
 trajectory. :class:`Odometry` does it one frame at a time, keeping the
 previous frame and the last motion between calls; :func:`run_odometry` runs
@@ -22,22 +23,12 @@ import numpy as np
 from .config import Config
 from .errors import SlamError
 from .features import grid_average
-from .frames import (
-    STAGES,
-    Frame,
-    PairRegistration,
-    describe,
-    prepare,
-    prepare_scan,
-    reads_ahead,
-    register_frames,
-    register_pair,
-    track_frames,
-)
+from .frames import STAGES, PairRegistration, register_frames, register_pair, track_frames
 from .geometry import check_pose, transform_points
 from .icp import icp_cloud
 from .icp_service import IcpService
 from .motion_guard import beyond, offset
+from .preparation import Frame, describe, prepare, prepare_scan, reads_ahead
 from .progress import progress_bar
 from .threads import one_blas_thread
 

@@ -44,7 +44,7 @@ from .icp import IcpCloud, icp_cloud
 from .icp_service import IcpService
 
 if TYPE_CHECKING:
-    from .frames import Frame
+    from .preparation import Frame
 
 MIN_KEPT = 30  # points: a crop that keeps fewer leaves ICP too little to fit six degrees of freedom; keep all then
 
@@ -108,7 +108,7 @@ def overlap_icp(
     crop_at=None,
     whole=False,
 ):
-    """ICP between the prepared clouds of two :class:`helpers.frames.Frame` (bare points for a frame built by
+    """ICP between the prepared clouds of two :class:`helpers.preparation.Frame` (bare points for a frame built by
     hand): ``(T_fixed_moving, rmse)``, an :class:`helpers.icp.IcpResult` with its information.
 
     With ``[registration] overlap_crop`` the moving cloud is cropped to the fixed scan's footprint where a

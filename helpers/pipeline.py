@@ -21,9 +21,9 @@ from .dataset import Dataset, create_dataset, is_default
 from .edges_worker import STARTUP_NODES
 from .errors import SlamError
 from .factors import Edge
-from .frames import prepare_scan, reads_ahead
 from .loopclosure import LoopQuery
 from .odometry import OdometryResult
+from .preparation import prepare_scan, reads_ahead
 from .progress import progress_bar
 from .slam import Slam, SlamResult, Step, build_pose_graph
 
@@ -51,7 +51,7 @@ def run_slam(
     registers its edges back in a helper process while the next scan is
     registered (:mod:`helpers.edges_worker`), and a run in global mode reads
     and prepares the next accepted scan in a thread while this one is
-    registered (:func:`helpers.frames.reads_ahead`): the same result, sooner."""
+    registered (:func:`helpers.preparation.reads_ahead`): the same result, sooner."""
     config = config or Config()
     skip = config.registration.skip_frames
     nodes = len(odometry.indices) if odometry is not None else -(-len(dataset) // skip)

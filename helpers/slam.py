@@ -31,12 +31,12 @@ from .edges_worker import BackgroundEdges
 from .errors import SlamError
 from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
-from .frames import prepare_scan
 from .geometry import check_points, check_pose
 from .icp_service import IcpService
 from .loopclosure import LoopCloser, LoopQuery
 from .odometry import Odometry, OdometryResult
 from .posegraph import OptimizationResult, PoseGraph
+from .preparation import prepare_scan
 from .submaps import SubmapIndex, build_submap
 from .threads import one_blas_thread
 
@@ -201,7 +201,7 @@ class Slam:
     def process(self, scan: np.ndarray | None, index: int, prepared: Future | None = None) -> Step:
         """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order.
 
-        ``prepared``: the future of :func:`~helpers.frames.prepare_scan` on this scan with
+        ``prepared``: the future of :func:`~helpers.preparation.prepare_scan` on this scan with
         this configuration, computed in another thread meanwhile (as
         :func:`helpers.pipeline.run_slam` does for the next scan); ``scan`` is
         then not read, and may be None. Only without a given odometry."""

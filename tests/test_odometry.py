@@ -356,7 +356,7 @@ def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan():
     overlap slides 2.9 m along the track, from the fit and from the true last motion alike (constraint 0.0065,
     just above the weak bar): the crop leaves a strip too short to pin it. A drone does not jump: ICP on the
     whole scan from the last motion lands within the jump limits of it and is kept."""
-    from helpers.frames import describe
+    from helpers.preparation import describe
 
     data, config = _benchmark_flight("sparse-150", swing=0.3)
     assert config.registration.overlap_crop and config.registration.motion_guard

@@ -261,18 +261,19 @@ def test_slam_driven_scan_by_scan_from_a_given_odometry_is_the_same_run(short_lo
 def test_each_scan_is_downsampled_and_made_ready_for_icp_once(flight_over, monkeypatch):
     """One scan, one preparation: every accepted scan is grid-averaged once on each grid (features, ICP)
     and its ICP cloud made ready once, then shared by the odometry and the edges back."""
-    import helpers.frames
     import helpers.icp
+    import helpers.preparation
 
     flight = flight_over(slice(0, 24))  # 8 accepted scans: each one is the fixed cloud of 3 later registrations
     prepared, averaged = [], []
-    for module in (helpers.frames, helpers.icp):
+    for module in (helpers.preparation, helpers.icp):
         real = module.icp_cloud
         monkeypatch.setattr(
             module, "icp_cloud", lambda points, *a, real=real: prepared.append(id(points)) or real(points, *a)
         )
-    real_average = helpers.frames.grid_average
-    monkeypatch.setattr(helpers.frames, "grid_average", lambda p, step: averaged.append(step) or real_average(p, step))
+    real_average = helpers.preparation.grid_average
+    counted = lambda p, step: averaged.append(step) or real_average(p, step)  # noqa: E731
+    monkeypatch.setattr(helpers.preparation, "grid_average", counted)
     result = run_slam(flight)
     assert len(result.indices) == 8 and result.edges_back_tried > 0
     assert sorted(prepared) == sorted(id(cloud) for cloud in result.clouds)  # each cloud once, and no other

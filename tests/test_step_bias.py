@@ -13,9 +13,10 @@ import numpy as np
 import pytest
 
 from helpers.config import Config
-from helpers.frames import prepare, track_frames
+from helpers.frames import track_frames
 from helpers.odometry import run_odometry
 from helpers.overlap import crop, footprint, inside, overlap
+from helpers.preparation import prepare
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_bias.py"
 # Consecutive accepted scans registered per flight. One step's ratio scatters by 1-2 % (2 m steps at 150 m): 30
