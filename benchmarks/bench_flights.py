@@ -116,7 +116,7 @@ def build_flight(options: dict):
     poses = poses_from_waypoints(waypoints)
     data = Dataset(LazyScans(Surface.from_height_field(field), poses, sensor), poses, waypoints, field,
                    IDENTITY_FRAME, sensor, name)  # fmt: skip
-    config, _ = fit_to_flight(flight_of(data), Config(sensor=sensor))
+    config, _ = fit_to_flight(flight_of(data), Config(sensor=sensor), gnss=bool(options.get("gnss")))
     return data, with_settings(config, options["set"])
 
 

@@ -144,7 +144,7 @@ def _run(args) -> int:
         print(f"GNSS: {len(gnss.indices)} positions from {args.gnss}, sigma {sigma} m (horizontal, vertical)")
     flight = flight_of(data)
     if not args.reference_values:
-        config, reasons = fit_to_flight(flight, config, given_keys(args.config))
+        config, reasons = fit_to_flight(flight, config, given_keys(args.config), gnss=gnss is not None)
     check_grid_steps(flight, config)  # before a word about the fit: a refused run prints only its error
     if not args.reference_values:
         print(

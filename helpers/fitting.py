@@ -97,6 +97,14 @@ LOW_FLIGHT_GRAPH = {"graph_weights": "hessian", "loop_kernel": "huber", "motion_
 # 0.22, 0.29, 0.25; Autzen at 150 m 0.96, 1.68, 0.84 -> 0.55, 0.55, 0.49; each alone helped less.
 LOW_FLIGHT_ICP_ITERATIONS = 100
 LOW_FLIGHT_INFORMATION = "plane"
+# GNSS fixes are absolute. Against relative edges alone the graph's answer does not change when every sigma is
+# scaled alike, so fixed sigmas need only the right proportions; against a fix they count at their size, and the
+# fixed ones (0.3 deg a step, some twenty times the odometry's real turn error at 700 m) let the fixes' noise
+# bend the trajectory. Where scans are skipped (higher flights; the low ones are decided above) a run with GNSS
+# therefore weighs each edge by its registration's calibrated information. With a 2 m fix at every scan
+# (benchmarks/bench_flights.py --gnss 2, optimised ATE, m): the default 0.42 -> 0.13, scene seeds 11 and 5 at
+# 700 m 0.45, 0.44 -> 0.19, 0.19 (lidar alone 0.22, 0.31, 0.27); with 10 m fixes the default 1.02 -> 0.17.
+GNSS_GRAPH_WEIGHTS = "hessian"
 # A true loop edge's surface RMSE comes from how the two scans sample the ground: rows of rays 0.2 deg apart,
 # so it shrinks with the height (0.26-0.39 m at the reference's 600 m, 0.02-0.13 m on Autzen 150 m above the
 # ground), while a false one, laid on ground metres away, stayed at 0.17-0.57 m on the low flights of
@@ -150,10 +158,11 @@ def check_grid_steps(flight: Flight, config: Config) -> None:
             )
 
 
-def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Config, list[str]]:
+def fit_to_flight(flight: Flight, config: Config, keep=frozenset(), gnss: bool = False) -> tuple[Config, list[str]]:
     """``config`` with its geometry-dependent values fitted to ``flight``, and
     one line per value saying what it became and why. ``keep``: the
-    ``(table, key)`` pairs the user set, left as they are."""
+    ``(table, key)`` pairs the user set, left as they are. ``gnss``: the run
+    adds GNSS fixes to its graph (:data:`GNSS_GRAPH_WEIGHTS`)."""
     if not flight.height > 0:  # the lengths scale with the height, and the strip would be empty
         raise SlamError(
             f"the flight is {flight.height:.1f} m above the ground (median over the waypoints): parameters can be "
@@ -245,6 +254,12 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset()) -> tuple[Con
                 "along the directions a step does not pin, its information is loose, and the flight's momentum "
                 "(a soft constant-velocity factor over three nodes) holds them",
             )
+    elif gnss:
+        wanted[("pose_graph", "graph_weights")] = (
+            GNSS_GRAPH_WEIGHTS,
+            "GNSS fixes are absolute, and against them the edges' sigmas count at their size: each edge is "
+            "weighed by its registration's calibrated information (the fixed sigmas let the fixes bend the path)",
+        )
     changes, reasons = {}, []
     for (table, key), (value, why) in wanted.items():
         if (table, key) in keep:

@@ -68,6 +68,12 @@ MUTANTS = {
         '    for fix in getattr(result, "gnss_factors", None) or []:\n',
         "    for fix in []:\n",
     ),
+    "a run with GNSS keeps the fixed sigmas": (
+        "tests/test_gnss.py",
+        "helpers/fitting.py",
+        "    elif gnss:\n",
+        "    elif False:\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",

@@ -117,3 +117,22 @@ def test_a_low_flight_registered_scan_to_scan_keeps_the_fixed_sigmas():
     mine = Config().with_values(registration=dict(icp_local_map=4))
     fitted, _ = fit_to_flight(low, mine, keep={("registration", "icp_local_map")})
     assert fitted.pose_graph.graph_weights == "hessian" and fitted.registration.icp_local_map == 4
+
+
+def test_a_run_with_gnss_weighs_its_edges_by_their_information(default_dataset):
+    """Against absolute fixes the edges' sigmas count at their size, so a run with GNSS weighs each edge by its
+    registration's information where scans are skipped; a low flight keeps the low flights' rule (scan to scan
+    with edges back, the fixed sigmas), and weights the user set are kept."""
+    flight = flight_of(default_dataset)
+    fitted, reasons = fit_to_flight(flight, Config(), gnss=True)
+    assert fitted == Config().with_values(features={"grid_step": 3.0}, pose_graph={"graph_weights": "hessian"})
+    assert any(line.startswith("[pose_graph] graph_weights = 'hessian': GNSS") for line in reasons)
+    assert fit_to_flight(flight, Config())[0].pose_graph.graph_weights == "icp"  # lidar alone: unchanged
+    mine = Config().with_values(pose_graph={"graph_weights": "identity"})
+    kept, _ = fit_to_flight(flight, mine, keep={("pose_graph", "graph_weights")}, gnss=True)
+    assert kept.pose_graph.graph_weights == "identity"
+    low = Flight(height=REFERENCE_HEIGHT / 4, spacing=2.0, surface_cell=1.0, strip=13.2)
+    scan_to_scan = Config().with_values(registration=dict(icp_local_map=1), pose_graph=dict(edges_back=4))
+    keep = {("registration", "icp_local_map"), ("pose_graph", "edges_back")}
+    assert fit_to_flight(low, scan_to_scan, keep=keep, gnss=True)[0].pose_graph.graph_weights == "icp"
+    assert fit_to_flight(low, Config(), gnss=True) == fit_to_flight(low, Config())
