@@ -31,7 +31,7 @@ from .icp_service import IcpService
 from .matching import match_features
 from .motion_guard import BETTER_PAIRED, SAME_MOTION, beyond, clearly_better, offset, with_momentum
 from .overlap import overlap_icp
-from .preparation import Frame, describe, prepare
+from .preparation import Frame, describe, elapsed_ms, prepare
 from .registration import robust_fit
 
 STAGES = ("downsample", "fpfh", "match", "msac", "icp")
@@ -73,7 +73,7 @@ def track_frames(moving: Frame, fixed: Frame, config: Config, motion: np.ndarray
     T_fine, rmse = refined
     jump_m, jump_deg = offset(motion, T_fine)
     paired, constraint = pairing(moving.icp, fixed.icp, T_fine, fit.inlier_distance)
-    timings = {"icp": _ms(start)}
+    timings = {"icp": elapsed_ms(start)}
     reasons = []
     if not rmse <= fit.icp_fallback_rmse:
         reasons.append(f"ICP RMSE {rmse:.2f} m > {fit.icp_fallback_rmse} m")
@@ -164,7 +164,7 @@ def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: in
             raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
     matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio, near)
     matches = np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
-    timings["match"] = _ms(start)
+    timings["match"] = elapsed_ms(start)
 
     # 2. Robust fit on the matched points (rigid, or yaw and translation: [registration] robust_fit).
     start = time.perf_counter()
@@ -173,7 +173,7 @@ def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: in
         T_coarse, inliers = robust_fit(moving.points[matches[:, 0]], fixed.points[matches[:, 1]], fit)
     except SlamError as exc:
         T_coarse, fallback = guess, f"robust fit failed ({exc}); ICP started from the previous motion"
-    timings["msac"] = _ms(start)
+    timings["msac"] = elapsed_ms(start)
 
     # 3. Refine with ICP; if it ends far off, try again from the fallback guess.
     start = time.perf_counter()
@@ -254,7 +254,7 @@ def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: in
     # motion are weighed by how sure each is (ICP's information, and the acceleration a drone may have).
     if momentum and fit.motion_guard and constraint < WEAK_CONSTRAINT:
         T_fine = with_momentum(guess, refined, config, 1 + stale)
-    timings["icp"] = _ms(start)
+    timings["icp"] = elapsed_ms(start)
     return PairRegistration(
         moving.points,
         fixed.points,
@@ -288,7 +288,3 @@ def _add(*timings: dict) -> dict:
         for stage, ms in part.items():
             out[stage] = out.get(stage, 0.0) + ms
     return out
-
-
-def _ms(start: float) -> float:
-    return 1000.0 * (time.perf_counter() - start)

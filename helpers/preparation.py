@@ -51,10 +51,10 @@ def prepare(scan: np.ndarray, config: Config) -> Frame:
     points = grid_average(scan, config.features.grid_step)
     icp_step = registration.icp_grid_step
     icp_points = grid_average(scan, icp_step) if icp_step > 0 else points
-    timings["downsample"] = _ms(start)
+    timings["downsample"] = elapsed_ms(start)
     start = time.perf_counter()
     icp = icp_cloud(icp_points, registration.metric, registration.icp_backend)
-    timings["icp"] = _ms(start)
+    timings["icp"] = elapsed_ms(start)
     frame = Frame(points, None, icp_points, timings, icp)
     return frame if registration.mode == "tracking" else describe(frame, config)
 
@@ -81,9 +81,11 @@ def describe(frame: Frame, config: Config) -> Frame:
         frame.keypoints, frame.features = keypoint_fpfh(
             frame.points, config.features.neighbors, config.features.keypoint_share
         )
-        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + _ms(start)
+        frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + elapsed_ms(start)
     return frame
 
 
-def _ms(start: float) -> float:
+def elapsed_ms(start: float) -> float:
+    """Milliseconds since ``start`` (a ``time.perf_counter()`` reading): the stages' timings here and in
+    :mod:`helpers.frames`."""
     return 1000.0 * (time.perf_counter() - start)
