@@ -14,6 +14,7 @@ first true pose; the ATE is taken against the true poses of those scans.
 - ours, global, keypoints 0.5: describing and matching the more tilted half of each scan (1.5 m grid);
 - ours, global, 2 m / 40 and 3 m / 30: other descriptor grids and fewer neighbours (issue 22's levers);
 - ours, tracking: ICP from the last motion, the global workflow when a check fails;
+- ours, tracking, 1 mm tolerance: the same, ICP stopping at the tolerance of earlier versions;
 - Open3D's recipe: its global-registration tutorial on 1.5 m voxels (FPFH,
   RANSAC on feature matches), refined by its generalized ICP;
 - small_gicp: GICP on 0.75 m voxels from a constant-velocity guess;
@@ -143,6 +144,7 @@ PEERS = {
     "ours, global, 2 m / 40": (ours("global", {"grid_step": 2.0, "neighbors": 40}), None),
     "ours, global, 3 m / 30": (ours("global", {"grid_step": 3.0, "neighbors": 30}), None),
     "ours, tracking": (ours("tracking"), None),
+    "ours, tracking, 1 mm tolerance": (ours("tracking", registration={"icp_tolerance": 1e-3}), None),
     "Open3D's recipe": (open3d_recipe, "open3d"),
     "small_gicp odometry": (small_gicp_odometry, "small_gicp"),
     "KISS-ICP": (kiss_icp_odometry, "kiss_icp"),

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from helpers.config import Config
 from helpers.errors import SlamError
 from helpers.icp import icp_cloud, icp_rmse, refine_icp
 from helpers.registration import estimate_rigid_msac, kabsch, trials_needed
@@ -188,6 +189,20 @@ def test_icp_tolerance_in_metres_stops_early_but_lands_nearby(flight):
     assert _displacement(T_loose, T_tight, flight.scans[13]) < 0.02
 
 
+@pytest.mark.parametrize("pair", [(13, 10), (33, 30), (40, 37)])
+def test_the_default_tolerance_stops_within_a_millimetre_or_two_of_convergence(flight, pair):
+    # small_gicp stops once a step moves no point more than the tolerance (1 cm); Gauss-Newton closes in fast
+    # near the answer, so what is left is far smaller: measured, at most 0.6 mm from the 1e-6 answer here
+    moving, fixed = (icp_cloud(flight.scans[k], "plane-to-plane", "small_gicp") for k in pair)
+    truth = np.linalg.inv(flight.poses[pair[1]]) @ flight.poses[pair[0]]
+    init = truth @ _transform(0.5, [1.0, -0.8, 0.2])
+    tolerance = Config().registration.icp_tolerance
+    T_tight, _ = refine_icp(moving, fixed, init, **keywords("plane-to-plane", "small_gicp", tolerance=1e-6))
+    T_default, _ = refine_icp(moving, fixed, init, **keywords("plane-to-plane", "small_gicp", tolerance=tolerance))
+    assert _displacement(T_default, T_tight, flight.scans[pair[0]]) < 2e-3
+    assert _displacement(T_default, truth, flight.scans[pair[0]]) < 0.05
+
+
 def test_icp_refuses_a_cloud_prepared_for_another_metric(flight):
     scan = flight.scans[0]
     with pytest.raises(SlamError, match="prepared for point-to-point"):
@@ -254,7 +269,6 @@ def test_pairing_says_how_well_the_pairs_pin_a_translation():
 def test_register_pair_with_the_yaw_and_translation_fit_recovers_a_known_transform(flight, yaw, shift):
     """``robust_fit = "msac4"`` through the registration entry point: the coarse fit is a pure yaw and
     translation (no tilt at all, so the 4-DoF fit ran), near the truth, and ICP adds the tilt."""
-    from helpers.config import Config
     from helpers.odometry import register_pair
 
     config = Config().with_values(registration={"robust_fit": "msac4"})
