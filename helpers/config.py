@@ -127,7 +127,9 @@ class RegistrationConfig(BoundedTable):
     icp_backend: str = param("small_gicp", "ICP library: small_gicp (fast) or open3d (the tutorial's first)")
     icp_max_iterations: int = param(30, "most ICP iterations")
     icp_tolerance: float = param(
-        1e-2, "ICP stops earlier once an iteration changes its RMSE (m) and inlier share by less"
+        1e-2,
+        "ICP stops once an iteration moves no point more than this, metres "
+        "(Open3D: changes its RMSE and inlier share by less)",
     )
     icp_fallback_rmse: float = param(1.5, "an ICP RMSE above this (metres) counts as a failed registration")
     icp_local_map: int = param(
