@@ -2,6 +2,7 @@
 
     nice -n 10 .venv/bin/python benchmarks/bench_flights.py [--flights default seed11-700 sparse-150 ...]
         [--laps 2] [--swing 0.3] [--seeds 0 1 2] [--set pose_graph.graph_weights=icp ...] [--map-error] [--gnss 2]
+        [--save flights.jsonl]
 
 Each flight is run as ``python -m helpers run`` runs it (parameters fitted to
 the flight by :func:`helpers.fitting.fit_to_flight`), in a fresh process of
@@ -21,10 +22,13 @@ value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted val
 low flights move by tens of percent from one seed to the next, so compare
 variants on several); ``--gnss SIGMA`` adds a simulated GNSS fix at every scan
 (``helpers.gnss.simulate_gnss``, sigma SIGMA m on each axis) to the pose graph.
-The table prints ATE (odometry -> optimised), the one-step RPE, the mean ratio of
-estimated to true step length, loops (false), the steps whose gated match was
-redone without the gate (``[features] match_gate``), whether the run calls itself
-trusted, and the first words of each problem named.
+The table prints ATE (odometry -> optimised), the ATE the run's graph expects of
+itself (``exp m``: :func:`helpers.graph_measures.expected_ate`, from its marginals; the
+trust flag asks it only where loops may hold a drifting odometry, :mod:`helpers.health`),
+the one-step RPE, the mean ratio of estimated to true step length, loops (false), the
+steps whose gated match was redone without the gate (``[features] match_gate``), whether
+the run calls itself trusted, and the first words of each problem named. ``--save FILE``
+appends each flight's figures, its health counts included, to FILE as JSON lines.
 """
 
 from __future__ import annotations
@@ -47,6 +51,7 @@ import numpy as np
 sys.path.insert(0, sys.argv[2])
 from bench_flights import build_flight
 from helpers.evaluation import map_errors, run_metrics
+from helpers.graph_measures import expected_ate
 from helpers.pipeline import run_slam
 options = json.loads(sys.argv[1])
 data, config = build_flight(options)
@@ -70,7 +75,8 @@ print(json.dumps({"scans": len(data), "accepted": m["n_accepted"], "loops": m["n
                   "false": m["n_false_loop_closures"], "ate_odo": m["ate_rmse_odometry_m"],
                   "ate": m["ate_rmse_optimized_m"], "rpe": m["rpe_trans_1_m"], "ratio": ratio,
                   "map": m.get("map_error_median_m"), "trusted": m["trusted"], "ungated": m["n_odometry_ungated"],
-                  "problems": m["health"]["problems"], "seconds": seconds,
+                  "problems": m["health"]["problems"], "seconds": seconds, "expected": expected_ate(result),
+                  "health": m["health"],
                   "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
 """
 
@@ -195,6 +201,9 @@ def main() -> None:
     parser.add_argument(
         "--gnss", type=float, default=0.0, metavar="SIGMA", help="a GNSS fix at every scan, SIGMA m on x, y and z"
     )
+    parser.add_argument(
+        "--save", type=Path, default=None, metavar="FILE", help="append each flight's figures to FILE (JSON lines)"
+    )
     args = parser.parse_args()
     from helpers.config import Config
     from helpers.errors import SlamError
@@ -204,7 +213,7 @@ def main() -> None:
     except (AttributeError, TypeError, ValueError, SlamError) as error:
         sys.exit(f"error: --set {' '.join(args.set)}: {error}")
     env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
-    print(f"{'flight':12} {'scans':>5} {'nodes':>5} {'ATE m':>13} {'RPE m':>6} {'step':>6} {'loops':>8} "
+    print(f"{'flight':12} {'scans':>5} {'nodes':>5} {'ATE m':>13} {'exp m':>6} {'RPE m':>6} {'step':>6} {'loops':>8} "
           f"{'ungated':>7} {'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
     for name, seed in [(name, seed) for name in args.flights for seed in args.seeds]:
         options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error,
@@ -217,11 +226,15 @@ def main() -> None:
             print(f"{label:12} failed: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
             continue
         r = json.loads(out.stdout.strip().splitlines()[-1])
+        if args.save:
+            with args.save.open("a") as saved:
+                saved.write(json.dumps({"flight": label, "swing": args.swing, "set": args.set, **r}) + "\n")
         ate = f"{r['ate_odo']:.2f}->{r['ate']:.2f}"
         mapped = f"{r['map']:.3f}" if r["map"] is not None else "-"
         problems = " | ".join(p[:60] for p in r["problems"])
         print(
-            f"{label:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['rpe']:6.3f} {r['ratio']:6.4f} "
+            f"{label:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['expected']:6.2f} {r['rpe']:6.3f} "
+            f"{r['ratio']:6.4f} "
             f"{r['loops']:5d} ({r['false']}) {r['ungated']:7d} {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
             f"{r['peak_gib']:5.2f}  {problems}",
             flush=True,

@@ -15,6 +15,7 @@ from .information import TRANSLATION_FIRST, whitened
 from .loopclosure import radius_after
 
 LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many (fixed) radii away
+MOVE_FLOOR_M = 0.01  # m: a move this small is no move (correction_sigmas)
 FALSE_LOOP_SIGMAS = 5.0  # a loop edge left this far off by the optimisation disagrees with the graph
 # (true loops end within a few sigmas of where the graph puts them, false ones far beyond: the benchmarks on the
 # default flight and on Autzen measure both)
@@ -44,6 +45,25 @@ def loop_correction(result, rebuilt=None) -> float:
         return 0.0
     rebuilt = rebuilt_poses(result) if rebuilt is None else rebuilt
     return _moved(rebuilt, optimized_with(result, []))
+
+
+def correction_sigmas(result, rebuilt=None) -> float:
+    """How far the loop edges moved the trajectory, in sigmas of the odometry's own uncertainty: the largest,
+    over the nodes, of the Mahalanobis length of a node's move (the run's graph against the same graph without
+    loops, as :func:`loop_correction`) under its position covariance in the graph without loops
+    (:meth:`helpers.posegraph.PoseGraph.position_covariances`, widened by :data:`MOVE_FLOOR_M`: the anchored
+    first node is known to micrometres). Odometry that drifted about as far as its information says comes
+    back by a few sigmas; a loop that bends the graph beyond what its steps allow moves it by many."""
+    if not result.loops:
+        return 0.0
+    rebuilt = rebuilt_poses(result) if rebuilt is None else rebuilt
+    graph, kernel = _run_graph(result, []), result.config.pose_graph.loop_kernel
+    free = graph.optimize(anchor_pose=result.odometry.poses[0], loop_kernel=kernel).poses
+    covariances = graph.position_covariances(free, result.odometry.poses[0], loop_kernel=kernel)
+    covariances = covariances + MOVE_FLOOR_M**2 * np.eye(3)
+    moved = rebuilt[:, :3, 3] - free[:, :3, 3]
+    squared = np.einsum("ki,ki->k", moved, np.linalg.solve(covariances, moved[:, :, None])[:, :, 0])
+    return float(np.sqrt(squared.max()))
 
 
 def loop_pull(result, suspects, rebuilt=None) -> float:

@@ -201,13 +201,21 @@ class PoseGraph:
         self, poses: np.ndarray, anchor_pose: np.ndarray, loop_kernel: str = "none", kernel_scale: float | None = None
     ) -> np.ndarray:
         """(K,) how sure the graph is of each node's position, in metres: the square root of the trace of
-        the node's marginal position covariance (``gtsam.Marginals``), the graph linearised at ``poses``
-        (K x 4 x 4, its optimised poses) with the first node held at ``anchor_pose`` as :meth:`optimize`
-        holds it. Near the anchor it is small; along a chain of odometry edges it grows with their
-        noise; absolute factors (GNSS fixes) keep it near their own sigmas everywhere."""
+        the node's marginal position covariance (:meth:`position_covariances`). Near the anchor it is small;
+        along a chain of odometry edges it grows with their noise; absolute factors (GNSS fixes) keep it
+        near their own sigmas everywhere."""
+        covariances = self.position_covariances(poses, anchor_pose, loop_kernel, kernel_scale)
+        return np.sqrt(np.trace(covariances, axis1=1, axis2=2))
+
+    def position_covariances(
+        self, poses: np.ndarray, anchor_pose: np.ndarray, loop_kernel: str = "none", kernel_scale: float | None = None
+    ) -> np.ndarray:
+        """(K, 3, 3) each node's marginal position covariance (m², ``gtsam.Marginals``) in the map frame, the
+        graph linearised at ``poses`` (K x 4 x 4, its optimised poses) with the first node held at
+        ``anchor_pose`` as :meth:`optimize` holds it."""
         poses = np.asarray(poses, dtype=float)
         if poses.shape != (self.num_nodes, 4, 4):
-            raise SlamError(f"position_sigmas needs {self.num_nodes} poses (4 x 4), got an array of {poses.shape}")
+            raise SlamError(f"the marginals need {self.num_nodes} poses (4 x 4), got an array of {poses.shape}")
         graph, _ = self._to_gtsam(check_pose(anchor_pose, "the anchor pose"), loop_kernel, kernel_scale)
         self._check_connected()
         values = gtsam.Values()
@@ -217,8 +225,10 @@ class PoseGraph:
             marginals = gtsam.Marginals(graph, values)
         except RuntimeError as exc:
             raise SlamError(f"GTSAM could not compute the pose graph's marginals: {exc}") from None
-        # a Pose3's covariance is rotation first; its translation block's trace is the same in any frame
-        return np.array([np.sqrt(np.trace(marginals.marginalCovariance(k)[3:, 3:])) for k in range(self.num_nodes)])
+        # a Pose3's covariance is rotation first and in the node's own frame: its rotation carries it to the map's
+        local = np.array([marginals.marginalCovariance(k)[3:, 3:] for k in range(self.num_nodes)])
+        rotations = poses[:, :3, :3]
+        return rotations @ local @ np.swapaxes(rotations, 1, 2)
 
     def _to_gtsam(self, anchor: np.ndarray, loop_kernel: str, kernel_scale: float | None):
         """GTSAM's factor graph: a prior holding node 0 at ``anchor``, then every factor in the order added,

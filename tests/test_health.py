@@ -4,12 +4,19 @@
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from helpers.config import Config
 from helpers.factors import Edge
 from helpers.gnss import GnssFixes
-from helpers.graph_measures import FALSE_LOOP_SIGMAS, loop_residuals, optimized_with, rebuilt_poses
-from helpers.health import CORRECTION_FLOOR_M, GNSS_MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
+from helpers.graph_measures import (
+    FALSE_LOOP_SIGMAS,
+    correction_sigmas,
+    loop_residuals,
+    optimized_with,
+    rebuilt_poses,
+)
+from helpers.health import CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
 from helpers.information import calibrated
 from helpers.odometry import OdometryResult
 from helpers.slam import build_pose_graph
@@ -196,7 +203,7 @@ def test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing():
     0.3 m fix at every node the graph expects its trajectory well within the bar, and says why it may."""
     weak = {"informations": [_info(1.0)] * (NODES - 1), "constraint": 0.0}
     alone = assess(_run(**weak))
-    assert not alone.trusted and alone.counts["expected_ate_m"] is None
+    assert not alone.trusted and alone.counts["expected_ate_m"] is None  # no loop holds them, no graph asked
     held = assess(_run(**weak, fixes=_fixes(0.3)))
     assert held.trusted, held.problems
     # 30 fixes of 0.3 m, each fused with steps of 1 m: each node's sigma is a little under the fix's sqrt(3) 0.3
@@ -207,5 +214,52 @@ def test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing():
 def test_gnss_fixes_too_loose_for_the_steps_leave_a_run_untrusted():
     """The same weak steps with 3 m fixes: the graph expects metres, and the run says so, naming GNSS."""
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(3.0)))
-    assert health.counts["expected_ate_m"] > GNSS_MAX_EXPECTED_ATE_M
+    assert health.counts["expected_ate_m"] > MAX_EXPECTED_ATE_M
     assert not health.trusted and len(health.problems) == 1 and "GNSS fixes" in health.problems[0]
+
+
+def _held_by_loops(config=CONFIG, loops=()):
+    """Every step on ground too flat by ICP's constraint, each known to 5 cm, and true loop edges from the first
+    node to every fifth: a low flight whose loops pull it back into place at every lap."""
+    true_loops = [Edge(0, k, _at(2.0 * k), 0.1, information=_info(0.05)) for k in range(5, NODES, 5)]
+    return _run(
+        informations=[_info(0.05)] * (NODES - 1), constraint=0.001, loops=true_loops + list(loops), config=config
+    )
+
+
+def test_loops_that_hold_the_trajectory_answer_the_drift_rules():
+    """The drift rules name every step too flat; the graph, its information calibrated and its loops agreeing
+    with it, expects its trajectory within 0.5 m, so the run is trusted and the weak steps only counted."""
+    health = assess(_held_by_loops())
+    assert health.trusted, health.problems
+    assert health.counts["n_weak_steps"] == NODES - 1
+    assert 0.0 < health.counts["expected_ate_m"] <= MAX_EXPECTED_ATE_M
+    assert health.counts["loop_correction_sigmas"] <= FALSE_LOOP_SIGMAS
+
+
+def test_only_a_graph_of_calibrated_information_that_agrees_with_itself_answers_them():
+    """The same run weighed by the fixed icp sigmas (chosen, not measured): the graph is not asked. With a
+    loop edge 3 m off the others, surer than they are and no kernel on it: the graph bends to it, so no loop
+    edge ends far from it, but the loops moved the trajectory by many times the sigmas of the steps between
+    them (about 0.3 m at the last node), and the drift rules stand."""
+    fixed = assess(_held_by_loops(config=Config().with_values(pose_graph={"graph_weights": "icp"})))
+    assert not fixed.trusted and "too flat" in fixed.warning()
+    assert fixed.counts["expected_ate_m"] is None and fixed.counts["loop_correction_sigmas"] is None
+    bent = assess(
+        _held_by_loops(config=CONFIG.with_values(pose_graph={"loop_kernel": "none"}), loops=[_loop_off_by(3.0, 0.01)])
+    )
+    assert bent.counts["largest_correction_m"] > 2.5 and bent.counts["loop_correction_sigmas"] > FALSE_LOOP_SIGMAS
+    assert not bent.trusted and "too flat" in bent.warning() and "moved the trajectory" in bent.warning()
+    assert bent.counts["expected_ate_m"] is None
+
+
+def test_the_loops_move_is_measured_in_the_sigmas_of_the_steps_between():
+    """Steps known to 0.1 m a side (rotation all but exact) and a loop edge, far surer, that puts the last node
+    1 m to the side: node k moves by k / 29 m where the loop-free chain leaves it sqrt(k) 0.1 m unsure sideways,
+    so the largest move is the last node's, sqrt(29) / 2.9 = 1.86 sigmas."""
+    sure_rotation = [_info(0.1, sigma_deg=1e-4)] * (NODES - 1)
+    loop = Edge(0, NODES - 1, _at(2.0 * (NODES - 1), 1.0), 0.1, information=_info(0.001, sigma_deg=1e-4))
+    run = _run(informations=sure_rotation, loops=[loop])
+    assert run.graph.poses[-1, 1, 3] == pytest.approx(1.0, abs=1e-3)
+    assert correction_sigmas(run) == pytest.approx(np.sqrt(NODES - 1) / (0.1 * (NODES - 1)), rel=0.01)
+    assert correction_sigmas(_run(informations=sure_rotation)) == 0.0  # no loop, no move

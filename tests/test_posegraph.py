@@ -258,3 +258,19 @@ def test_position_sigmas_add_up_along_a_chain_and_meet_a_fix_as_gaussians_do():
     assert fused[n] < min(chain[n], np.sqrt(3) * fix_sigma)
     with pytest.raises(SlamError, match="poses"):
         graph.position_sigmas(poses[:-1], np.eye(4))
+
+
+def test_position_covariances_are_in_the_map_frame():
+    """A chain flown north (the first node turned by 90 degrees), each 2 m step known to 0.1 m along its own
+    x axis (the track), 0.3 m across it and 0.2 m up: in the map, the spread across the track lies along x."""
+    n, north = 6, pose(rotvec=(0, 0, np.pi / 2))
+    graph = PoseGraph()
+    graph.add_node(north)
+    for _ in range(n):
+        graph.append(pose(t=(2, 0, 0)), sigmas=[0.1, 0.3, 0.2] + [1e-6] * 3)
+    poses = graph.optimize(anchor_pose=north).poses
+    covariances = graph.position_covariances(poses, north)
+    k = np.arange(n + 1)[:, None]
+    np.testing.assert_allclose(np.diagonal(covariances, axis1=1, axis2=2)[1:], (k * [0.09, 0.01, 0.04])[1:], rtol=1e-3)
+    assert np.abs(covariances[1:] - covariances[1:] * np.eye(3)).max() < 1e-6  # no correlation between the axes
+    np.testing.assert_allclose(graph.position_sigmas(poses, north), np.sqrt(k[:, 0] * 0.14), atol=2e-4)
