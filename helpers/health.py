@@ -116,6 +116,11 @@ class Health:
             + (f" (moving it by {c['loops_against_graph_pull_m']:.2f} m)" if c["n_loops_against_graph"] else "")
             + "; "
             f"{c['n_edges_back_left_out']} of {c['n_edges_back_tried']} edges back left out"
+            + (
+                ""
+                if c.get("loop_correction_sigmas") is None
+                else f"; the loops moved the trajectory by {c['loop_correction_sigmas']:.1f} of the odometry's sigmas"
+            )
             + ("" if c.get("expected_ate_m") is None else f"; the graph expects an ATE of {c['expected_ate_m']:.2f} m")
         )
 
@@ -245,12 +250,22 @@ def assess(result) -> Health:
         # The odometry drifted: do the loops hold the trajectory all the same, by the graph's own reckoning? Only
         # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
         # the rest, and the loops moving the trajectory no farther than the odometry's own sigmas allow.
-        counts["loop_correction_sigmas"] = round(correction_sigmas(result, rebuilt), 2)
-        if counts["loop_correction_sigmas"] <= FALSE_LOOP_SIGMAS:
+        moved = correction_sigmas(result, rebuilt)
+        counts["loop_correction_sigmas"] = round(moved, 2)
+        if moved > FALSE_LOOP_SIGMAS:
+            why = (
+                f"they moved the trajectory by {moved:.1f} times the sigmas the odometry's information gives it, "
+                f"more than {FALSE_LOOP_SIGMAS:g}, so that information is too sure to judge by"
+            )
+        else:
             expected = expected_ate(result)
             counts["expected_ate_m"] = round(expected, 3)
-            if expected <= MAX_EXPECTED_ATE_M:
-                problems = [problem for problem in problems if not any(problem is said for said in drift)]
+            why = f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
+        if expected is not None and expected <= MAX_EXPECTED_ATE_M:
+            problems = [problem for problem in problems if not any(problem is said for said in drift)]
+        else:  # the last word of the drift rules says why the graph could not answer them
+            index = next(k for k in reversed(range(len(problems))) if any(problems[k] is said for said in drift))
+            problems[index] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
     return Health(counts, problems)
 
 
