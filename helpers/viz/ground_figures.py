@@ -92,3 +92,18 @@ def stage_errors_figure(ground_truth, stages: dict, xlabel="node (accepted scan)
     grid(ax)
     ax.legend(fontsize=9, loc="upper left")
     return fig
+
+
+def sigma_errors_figure(ground_truth, graphs: dict, colors=None, xlabel="node (accepted scan)"):
+    """Each node's distance from its true position (solid) beside the position sigma its graph gives it
+    (dashed), for each graph (label -> ((K, 4, 4) optimised poses, (K,) sigmas in metres)): where the dashed
+    line lies near the solid one, the graph knows how far it is off."""
+    truth = np.asarray(ground_truth)[:, :3, 3]
+    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    for (label, (poses, sigmas)), color in zip(graphs.items(), colors or STAGE_COLORS[2:], strict=False):
+        ax.plot(np.linalg.norm(np.asarray(poses)[:, :3, 3] - truth, axis=1), color=color, lw=2, label=f"{label}: error")
+        ax.plot(np.asarray(sigmas), color=color, lw=1.5, ls="--", label=f"{label}: the graph's sigma")
+    ax.set(xlabel=xlabel, ylabel="metres", ylim=(0, None))
+    grid(ax)
+    ax.legend(fontsize=9, loc="upper left", ncols=2)
+    return fig
