@@ -93,3 +93,28 @@ def test_sparse_fixes(capsys):
         ex.check_sparse_fixes(wrong, 4, graph, initial, fixes, 1.0, truth)
         assert said(capsys) == "not yet"
     assert graph.size() == 20  # the check added its factors to a graph of its own
+
+
+def _along_x(offsets):
+    """(K, 4, 4) poses at x = 2 k + ``offsets[k]``."""
+    poses = np.tile(np.eye(4), (len(offsets), 1, 1))
+    poses[:, 0, 3] = 2.0 * np.arange(len(offsets)) + np.asarray(offsets, float)
+    return poses
+
+
+def test_sigmas_off(capsys):
+    truth = _along_x(np.zeros(6))
+    poses = _along_x([0.0, 0.1, 0.3, 0.2, 0.5, 0.6])
+    sigmas = np.array([1e-4, 0.1, 0.1, 0.2, 0.5, 0.6])  # node 2 is 3 sigmas off; node 5, farthest in metres, 1
+    ex.check_sigmas_off(2, 3.0, truth, poses, sigmas)
+    assert said(capsys) == "correct"
+    ex.check_sigmas_off(5, 1.0, truth, poses, sigmas)  # the farthest in metres
+    assert "farthest off in metres" in capsys.readouterr().out
+    rms = np.sqrt(np.mean([0, 0.01, 0.09, 0.04, 0.25, 0.36]) / np.mean(sigmas**2))
+    ex.check_sigmas_off(2, rms, truth, poses, sigmas)
+    assert "over all nodes" in capsys.readouterr().out
+    ex.check_sigmas_off(2, 9.0, truth, poses, sigmas)
+    assert "squared ratio" in capsys.readouterr().out
+    for node, value in ((None, 3.0), (2, None), (3, 3.0), (2, 2.0)):
+        ex.check_sigmas_off(node, value, truth, poses, sigmas)
+        assert said(capsys) == "not yet"

@@ -7,6 +7,8 @@
   information pins least, and its sigma there.
 * :func:`check_sparse_fixes`: the ATE of a graph given a GNSS fix on every
   few nodes only, recomputed here with GTSAM.
+* :func:`check_sigmas_off`: the node farthest from the truth in its own
+  position sigmas, and by how many.
 """
 
 from __future__ import annotations
@@ -114,3 +116,32 @@ def check_sparse_fixes(ate_value, every: int, graph, initial, fixes, sigma: floa
         f"ATE {expected:.2f} m, {ratio:.2g} x that of a fix on every node (sqrt({every}) = {np.sqrt(every):.2g})",
         "",
     )
+
+
+def _sigmas_off(truth, poses, sigmas) -> tuple[int, float, np.ndarray]:
+    """(node, its distance from the truth over its sigma, every node's) for (K, 4, 4) ``poses`` and ``truth``
+    and (K,) position ``sigmas`` (m); the anchored first node, known to a fraction of a millimetre, left out."""
+    errors = np.linalg.norm(np.asarray(poses)[:, :3, 3] - np.asarray(truth)[:, :3, 3], axis=1)
+    ratios = errors / np.asarray(sigmas, dtype=float)
+    ratios[0] = 0.0
+    node = int(np.argmax(ratios))
+    return node, float(ratios[node]), errors
+
+
+def check_sigmas_off(node, sigmas_off, truth, poses, sigmas) -> None:
+    """Exercise 4: ``node``, the node of ``poses`` (K x 4 x 4) farthest from ``truth`` in its own position
+    ``sigmas`` (K,, m), and ``sigmas_off``, its distance from the truth over its sigma."""
+    if unanswered(node) or unanswered(sigmas_off):
+        return say(False, "", NO_ANSWER)
+    expected_node, expected, errors = _sigmas_off(truth, poses, sigmas)
+    sigmas = np.asarray(sigmas, dtype=float)
+    rms = np.sqrt(np.mean(errors**2)) / np.sqrt(np.mean(sigmas**2))
+    if np.isclose(float(sigmas_off), rms, rtol=0.02):
+        return say(False, "", "that is the ATE over the expected ATE, over all nodes: take each node in its own sigma")
+    if int(node) == int(np.argmax(errors)) and int(node) != expected_node:
+        return say(False, "", "that node is the farthest off in metres; its sigma is larger than some others'")
+    if np.isclose(float(sigmas_off), expected**2, rtol=0.02):
+        return say(False, "", "that is a squared ratio: divide the distance by the sigma itself")
+    if int(node) != expected_node or not np.isclose(float(sigmas_off), expected, rtol=0.02):
+        return say(False, "", "divide each node's distance from the truth by its sigma, and take the largest")
+    say(True, "independent errors would rarely leave a node more than two or three of its sigmas off", "")
