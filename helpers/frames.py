@@ -5,11 +5,12 @@ descriptors, its ICP cloud). :func:`register_frames` matches descriptors, fits a
 (MSAC, rigid or yaw and translation: ``[registration] robust_fit``) and
 refines it by ICP, the flight's last motion guarding each step
 (:mod:`helpers.motion_guard`); :func:`track_frames` runs ICP alone from the
-last motion. The ICP stops when an iteration changes its RMSE by less than
-``[registration] icp_tolerance`` metres and its inlier fraction by less than
-that fraction (a tighter criterion sometimes oscillates by a few inliers
-until the iteration cap); ``benchmarks/bench_registration.py`` measures what
-this tolerance costs and changes.
+last motion. The ICP stops once an iteration moves no point by more than
+``[registration] icp_tolerance`` metres (small_gicp, the default back end;
+with Open3D's, once it changes the RMSE by less than that and the inlier
+fraction by less than that fraction: :func:`helpers.icp.refine_icp`);
+``benchmarks/bench_registration.py`` measures what this tolerance costs and
+changes.
 
 A registration returns ``T_fine``, the transform ``T_fixed_moving`` that
 carries the moving scan into the fixed scan's frame.
