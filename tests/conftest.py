@@ -40,6 +40,22 @@ def autzen():
     return AUTZEN
 
 
+@pytest.fixture(scope="session")
+def benchmark_flight():
+    """``benchmark_flight(name, swing=0.0, seed=0)``: (lazy dataset, fitted config) of
+    ``benchmarks/bench_flights.py``'s flight ``name``, two laps, the speed swinging by ``swing``, lidar noise
+    seed ``seed``, as ``run`` fits it."""
+    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
+    if benchmarks not in sys.path:
+        sys.path.insert(0, benchmarks)
+    from bench_flights import build_flight
+
+    def flight(name: str, swing: float = 0.0, seed: int = 0):
+        return build_flight({"name": name, "laps": 2, "swing": swing, "set": [], "map_error": False, "seed": seed})
+
+    return flight
+
+
 @pytest.fixture()
 def grid_tile(tmp_path):
     """``grid_tile(name, half_x, half_y, height)``: a LAS tile of one point per m²

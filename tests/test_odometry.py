@@ -1,8 +1,5 @@
 """Odometry over a short stretch of the default flight, including a turn."""
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -301,25 +298,14 @@ def test_after_a_blind_step_the_guess_is_the_last_step_and_its_age_is_counted():
     assert staleness([False] + [True] * 5) == 5
 
 
-def _benchmark_flight(name: str, swing: float, seed: int = 0):
-    """(lazy dataset, fitted config) of ``benchmarks/bench_flights.py``'s flight ``name``, two laps, lidar noise
-    seed ``seed``."""
-    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    if benchmarks not in sys.path:
-        sys.path.insert(0, benchmarks)
-    from bench_flights import build_flight
-
-    return build_flight({"name": name, "laps": 2, "swing": swing, "set": [], "map_error": False, "seed": seed})
-
-
-def test_steps_over_a_lake_keep_their_length():
+def test_steps_over_a_lake_keep_their_length(benchmark_flight):
     """150 m above the sparse tile (lidar noise seed 1), scans 110-125 cross a lake: no relief pins a step along
     the track. Generalized ICP's Hessian still claimed a 0.02 m sigma there, so the momentum blend followed ICP's
     slide towards the last scan, and the next guess started from the shortened step: the steps came out 0.5-1.3
     m short one after another (a mean step ratio of 0.925 over these 60), and the loops could not undo it, as
     both laps slid alike (ATE 35.8 m). Fitted for a low flight, each step's information comes from the
     point-to-plane Hessian, which is near zero along the track there, and ICP is given time to converge."""
-    data, config = _benchmark_flight("sparse-150", swing=0.0, seed=1)
+    data, config = benchmark_flight("sparse-150", swing=0.0, seed=1)
     assert config.pose_graph.information == "plane"
     scans = list(range(70, 130))
     result = run_odometry([data.scans[k] for k in scans], data.poses[scans[0]], config)
@@ -333,13 +319,13 @@ def test_steps_over_a_lake_keep_their_length():
     assert abs(np.mean(estimated_m / true_m) - 1.0) < 0.03, np.round(estimated_m - true_m, 2)
 
 
-def test_a_turn_begun_over_water_is_followed(autzen):
+def test_a_turn_begun_over_water_is_followed(autzen, benchmark_flight):
     """250 m above Autzen with the speed swinging by 30 %, the drone enters a 6-degree-a-step turn over the
     river (scans 64-69: flat, sparse ground, no fit explains the matches). Before the odometry knew which steps
     measured nothing, it kept the straight motion through the turn and then doubted the first fit that saw it
     (its turn was 6 degrees from the stale guess): 5 degrees lost a step, 23 in all. Every step must stay
     within a degree of the truth."""
-    data, config = _benchmark_flight("autzen-250", swing=0.3)
+    data, config = benchmark_flight("autzen-250", swing=0.3)
     assert config.registration.skip_frames == 1 and config.registration.motion_guard
     scans = range(58, 77)
     result = run_odometry([data.scans[k] for k in scans], data.poses[58], config)
@@ -351,14 +337,14 @@ def test_a_turn_begun_over_water_is_followed(autzen):
     assert max(errors) < 1.0, np.round(errors, 2)
 
 
-def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan():
+def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan(benchmark_flight):
     """150 m above the sparse tile with the speed swinging, the step from scan 88 to 89 registered on the
     overlap slides 2.9 m along the track, from the fit and from the true last motion alike (constraint 0.0065,
     just above the weak bar): the crop leaves a strip too short to pin it. A drone does not jump: ICP on the
     whole scan from the last motion lands within the jump limits of it and is kept."""
     from helpers.preparation import describe
 
-    data, config = _benchmark_flight("sparse-150", swing=0.3)
+    data, config = benchmark_flight("sparse-150", swing=0.3)
     assert config.registration.overlap_crop and config.registration.motion_guard
     fixed, moving = (describe(prepare(data.scans[k], config), config) for k in (88, 89))
     truth = np.linalg.inv(data.poses[88]) @ data.poses[89]

@@ -2,9 +2,6 @@
 simulator's poses: it must say what the truth says (issue 21's bar for real tiles: trusted exactly when the ATE is
 at most 1 m). Skipped when the tile is not there."""
 
-import sys
-from pathlib import Path
-
 from helpers.health import MAX_FALLBACK_SHARE, assess
 from helpers.metrics import ate
 from helpers.pipeline import run_slam
@@ -12,22 +9,12 @@ from helpers.pipeline import run_slam
 REAL_TILE_BAR_M = 1.0  # issue 21: a run over a real tile is to be trusted exactly when its ATE is at most this
 
 
-def _benchmark_flight(name: str):
-    """(lazy dataset, fitted config) of ``benchmarks/bench_flights.py``'s flight ``name``, two laps."""
-    benchmarks = str(Path(__file__).resolve().parents[1] / "benchmarks")
-    if benchmarks not in sys.path:
-        sys.path.insert(0, benchmarks)
-    from bench_flights import build_flight
-
-    return build_flight({"name": name, "laps": 2, "swing": 0.0, "set": [], "map_error": False, "seed": 0})
-
-
-def test_the_trust_flag_says_what_the_truth_says_150_m_above_autzen(autzen):
+def test_the_trust_flag_says_what_the_truth_says_150_m_above_autzen(autzen, benchmark_flight):
     """Two laps 150 m above the real tile, fitted as ``run`` fits them. Over its flat stretches the odometry's
     robust fits fail and ICP slides, so the rules that read drift name the run; the loops of the second lap
     may mend it. Whichever way this machine's run goes, the flag must match the truth, and the figures it
     judged by are in its counts."""
-    data, config = _benchmark_flight("autzen-150")
+    data, config = benchmark_flight("autzen-150")
     result = run_slam(data, config)
     error = ate(result.poses_optimized, data.poses[result.indices]).rmse
     health = assess(result)
