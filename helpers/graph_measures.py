@@ -37,29 +37,31 @@ def expected_ate(result) -> float:
     return float(np.sqrt(np.mean(sigmas**2)))
 
 
-def loop_correction(result, rebuilt=None) -> float:
+def loop_correction(result, rebuilt=None, without=None) -> float:
     """How far (m) the loop edges moved any pose: the run's graph against the same graph without them, both
     rebuilt from the run's edges (as :func:`loop_pull`: GNSS fixes in the run's own graph move it too, and
-    that is not the loops' doing). ``rebuilt``: the run's graph's poses so rebuilt, if already computed."""
+    that is not the loops' doing). ``rebuilt``: the run's graph's poses so rebuilt, and ``without``: those of
+    the graph without loops (``optimized_with(result, [])``), if already computed."""
     if not result.loops:
         return 0.0
     rebuilt = rebuilt_poses(result) if rebuilt is None else rebuilt
-    return _moved(rebuilt, optimized_with(result, []))
+    return _moved(rebuilt, optimized_with(result, []) if without is None else without)
 
 
-def correction_sigmas(result, rebuilt=None) -> float:
+def correction_sigmas(result, rebuilt=None, without=None) -> float:
     """How far the loop edges moved the trajectory, in sigmas of the odometry's own uncertainty: the largest,
     over the nodes, of the Mahalanobis length of a node's move (the run's graph against the same graph without
     loops, as :func:`loop_correction`) under its position covariance in the graph without loops
     (:meth:`helpers.posegraph.PoseGraph.position_covariances`, widened by :data:`MOVE_FLOOR_M`: the anchored
     first node is known to micrometres). Odometry that drifted about as far as its information says comes
-    back by a few sigmas; a loop that bends the graph beyond what its steps allow moves it by many."""
+    back by a few sigmas; a loop that bends the graph beyond what its steps allow moves it by many.
+    ``rebuilt`` and ``without`` as for :func:`loop_correction`."""
     if not result.loops:
         return 0.0
     rebuilt = rebuilt_poses(result) if rebuilt is None else rebuilt
-    graph, kernel = _run_graph(result, []), result.config.pose_graph.loop_kernel
-    free = graph.optimize(anchor_pose=result.odometry.poses[0], loop_kernel=kernel).poses
-    covariances = graph.position_covariances(free, result.odometry.poses[0], loop_kernel=kernel)
+    free = optimized_with(result, []) if without is None else without
+    kernel = result.config.pose_graph.loop_kernel
+    covariances = _run_graph(result, []).position_covariances(free, result.odometry.poses[0], loop_kernel=kernel)
     covariances = covariances + MOVE_FLOOR_M**2 * np.eye(3)
     moved = rebuilt[:, :3, 3] - free[:, :3, 3]
     squared = np.einsum("ki,ki->k", moved, np.linalg.solve(covariances, moved[:, :, None])[:, :, 0])

@@ -74,6 +74,7 @@ from .graph_measures import (
     loop_correction,
     loop_pull,
     loops_against_graph,
+    optimized_with,
     rebuilt_poses,
     revisits,
 )
@@ -144,10 +145,11 @@ def assess(result) -> Health:
     flown_to = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(positions, axis=0), axis=1))])
     revisited, unclosed = revisits(result, flown_to)
     flown = float(flown_to[-1])
-    rebuilt = rebuilt_poses(result) if result.loops else None  # both measures start from it
+    rebuilt = rebuilt_poses(result) if result.loops else None  # the loop measures start from it ...
+    without = optimized_with(result, []) if result.loops else None  # ... and from the graph without loops
     held = bool(getattr(result, "gnss_factors", None))  # GNSS fixes hold every node: drift stays out of the map
     expected = expected_ate(result) if held else None
-    correction = loop_correction(result, rebuilt)
+    correction = loop_correction(result, rebuilt, without)
     against = loops_against_graph(result)
     pull = loop_pull(result, against, rebuilt)
     counts = {
@@ -250,7 +252,7 @@ def assess(result) -> Health:
         # The odometry drifted: do the loops hold the trajectory all the same, by the graph's own reckoning? Only
         # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
         # the rest, and the loops moving the trajectory no farther than the odometry's own sigmas allow.
-        moved = correction_sigmas(result, rebuilt)
+        moved = correction_sigmas(result, rebuilt, without)
         counts["loop_correction_sigmas"] = round(moved, 2)
         if moved > FALSE_LOOP_SIGMAS:
             why = (
