@@ -174,7 +174,7 @@ def assess(result) -> Health:
         "expected_ate_m": None if expected is None else round(expected, 3),
         "loop_correction_sigmas": None,  # asked only when the drift rules name a run its loops may hold (below)
     }
-    problems, drift = [], []  # drift: what the rules that read the odometry's drift said, which loops may answer
+    problems, drift = [], []  # drift: the indices of the problems the drift rules name (which loops may answer)
     if not held and steps and len(fallbacks) > MAX_FALLBACK_SHARE * steps:
         problems.append(
             f"{len(fallbacks)} of {steps} odometry steps ({len(fallbacks) / steps:.0%}) could not be registered "
@@ -187,7 +187,7 @@ def assess(result) -> Health:
                 else f"Try a finer [features] grid_step (now {config.features.grid_step} m), or fly higher."
             )
         )
-        drift.append(problems[-1])
+        drift.append(len(problems) - 1)
     if len(poor):
         problems.append(
             f"{len(poor)} odometry steps kept an ICP RMSE above {fit.icp_fallback_rmse} m (scans "
@@ -201,7 +201,7 @@ def assess(result) -> Health:
             "unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a narrow strip. "
             "Fly higher, so that each scan sees more relief."
         )
-        drift.append(problems[-1])
+        drift.append(len(problems) - 1)
     drifted = correction > max(MAX_CORRECTION_SHARE * flown, CORRECTION_FLOOR_M)  # the last rule below
     loops_disagree = bool(against) and pull > CORRECTION_FLOOR_M
     if loops_disagree:
@@ -239,7 +239,7 @@ def assess(result) -> Health:
             "trajectory and the map keep part of that drift. Likely cause: odometry steps on weak ground (too flat, "
             "little overlap). Fly higher, or over the same ground more than once, so that loops close in more places."
         )
-        drift.append(problems[-1])
+        drift.append(len(problems) - 1)
     if held and expected > MAX_EXPECTED_ATE_M:
         problems.append(
             f"With {len(result.gnss_factors)} GNSS fixes the graph expects its trajectory to be {expected:.2f} m off "
@@ -264,10 +264,9 @@ def assess(result) -> Health:
             counts["expected_ate_m"] = round(expected, 3)
             why = f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
         if expected is not None and expected <= MAX_EXPECTED_ATE_M:
-            problems = [problem for problem in problems if not any(problem is said for said in drift)]
+            problems = [problem for k, problem in enumerate(problems) if k not in drift]
         else:  # the last word of the drift rules says why the graph could not answer them
-            index = next(k for k in reversed(range(len(problems))) if any(problems[k] is said for said in drift))
-            problems[index] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
+            problems[drift[-1]] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
     return Health(counts, problems)
 
 

@@ -158,8 +158,8 @@ def test_a_hovering_flight_has_its_loop_corrections_judged_in_metres():
         assert (health.counts["largest_correction_m"] > CORRECTION_FLOOR_M) != trusted
         assert health.trusted == trusted, health.problems
         assert trusted or "the flight hovered" in health.warning()
-        # hovering drifts by 0.2 m a step: the loop's move is within the steps' sigmas, but the graph expects more
-        # than the bar of the nodes between, and the warning says so
+        # hovering drifts by 0.2 m a step: the loop's move is within the steps' sigmas, but the graph expects the
+        # nodes between its ends farther off than the bar, and the warning says so
         assert (
             trusted or f"expects its trajectory to be {health.counts['expected_ate_m']:.2f} m off" in health.warning()
         )
