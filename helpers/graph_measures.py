@@ -28,9 +28,7 @@ def expected_ate(result) -> float:
     poses. It is as honest as the edges' information: with calibrated information and a fix at every scan
     the ATE was 0.9-1.35 times it on six low flights, four with 2 m fixes and two with 10 m ones (the
     README's "Your own data")."""
-    graph = _run_graph(result, result.loops)
-    for fix in getattr(result, "gnss_factors", None) or []:
-        graph.add_factor(fix)
+    graph = _graph_as_run(result)
     sigmas = graph.position_sigmas(
         result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
     )
@@ -53,9 +51,11 @@ def correction_sigmas(result, rebuilt=None, without=None) -> float:
     over the nodes, of the Mahalanobis length of a node's move (the run's graph against the same graph without
     loops, as :func:`loop_correction`) under its position covariance in the graph without loops
     (:meth:`helpers.posegraph.PoseGraph.position_covariances`, widened by :data:`MOVE_FLOOR_M`: the anchored
-    first node is known to micrometres). Odometry that drifted about as far as its information says comes
-    back by a few sigmas; a loop that bends the graph beyond what its steps allow moves it by many.
-    ``rebuilt`` and ``without`` as for :func:`loop_correction`."""
+    first node is known to micrometres). Odometry whose errors are independent, as its information says,
+    comes back by a few sigmas; a loop that bends the graph beyond what its steps allow moves it by many, and
+    so do loops mending errors that ran the same way for tens of steps (:mod:`helpers.health` counts it, and
+    tells the two apart by :func:`loops_off_the_rest`). ``rebuilt`` and ``without`` as for
+    :func:`loop_correction`."""
     if not result.loops:
         return 0.0
     rebuilt = rebuilt_poses(result) if rebuilt is None else rebuilt
@@ -66,6 +66,34 @@ def correction_sigmas(result, rebuilt=None, without=None) -> float:
     moved = rebuilt[:, :3, 3] - free[:, :3, 3]
     squared = np.einsum("ki,ki->k", moved, np.linalg.solve(covariances, moved[:, :, None])[:, :, 0])
     return float(np.sqrt(squared.max()))
+
+
+def left_out_residuals(result) -> list[tuple[float, float, float]]:
+    """Per loop edge: how far it ends from where the run's graph *without it* puts it, (m, deg, sigmas)
+    (:meth:`helpers.posegraph.PoseGraph.left_out_residuals`, in the graph the run optimised: its edges,
+    loops and GNSS fixes, at its optimised poses). Unlike :func:`loop_residuals` it sees a loop the graph
+    bent to: surer than the steps around it, such a loop ends near the optimised graph, but far from the
+    graph without it. Raises :class:`helpers.errors.SlamError` when GTSAM cannot compute the marginals."""
+    if not result.loops:
+        return []
+    residuals, lengths = _graph_as_run(result).left_out_residuals(
+        result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
+    )
+    metres, degrees = np.linalg.norm(residuals[:, 3:], axis=1), np.degrees(np.linalg.norm(residuals[:, :3], axis=1))
+    return [(float(m), float(d), float(n)) for m, d, n in zip(metres, degrees, lengths, strict=True)]
+
+
+def loops_off_the_rest(result) -> list[tuple[object, tuple[float, float, float]]]:
+    """The loop edges the rest of the graph disagrees with, each judged against the graph without it
+    (:func:`left_out_residuals`): beyond :data:`FALSE_LOOP_SIGMAS` and farther off than a false loop
+    (:func:`helpers.evaluation.is_false_loop`). Each as (loop edge, (m, deg, sigmas))."""
+    from .evaluation import is_false_loop  # evaluation reads this module
+
+    return [
+        (loop, residual)
+        for loop, residual in zip(result.loops, left_out_residuals(result), strict=True)
+        if residual[2] > FALSE_LOOP_SIGMAS and is_false_loop(residual[0], residual[1])
+    ]
 
 
 def loop_pull(result, suspects, rebuilt=None) -> float:
@@ -103,6 +131,14 @@ def _run_graph(result, loops):
     from .slam import build_pose_graph  # the run's own graph
 
     return build_pose_graph(result.odometry, result.extra_edges, loops, result.config)
+
+
+def _graph_as_run(result):
+    """The graph the run optimised, rebuilt: its edges, its loop edges and its GNSS fixes."""
+    graph = _run_graph(result, result.loops)
+    for fix in getattr(result, "gnss_factors", None) or []:
+        graph.add_factor(fix)
+    return graph
 
 
 def _moved(poses: np.ndarray, other: np.ndarray) -> float:

@@ -214,21 +214,78 @@ class PoseGraph:
         graph linearised at ``poses`` (K x 4 x 4, its optimised poses) with the first node held at
         ``anchor_pose`` as :meth:`optimize` holds it."""
         poses = np.asarray(poses, dtype=float)
-        if poses.shape != (self.num_nodes, 4, 4):
-            raise SlamError(f"the marginals need {self.num_nodes} poses (4 x 4), got an array of {poses.shape}")
-        graph, _ = self._to_gtsam(check_pose(anchor_pose, "the anchor pose"), loop_kernel, kernel_scale)
-        self._check_connected()
-        values = gtsam.Values()
-        for k, pose in enumerate(poses):
-            values.insert(k, pose3(pose))
-        try:
-            marginals = gtsam.Marginals(graph, values)
-        except RuntimeError as exc:
-            raise SlamError(f"GTSAM could not compute the pose graph's marginals: {exc}") from None
+        graph, _ = self._gtsam_at(poses, anchor_pose, loop_kernel, kernel_scale)
+        marginals = self._marginals(graph, self._values(poses))
         # a Pose3's covariance is rotation first and in the node's own frame: its rotation carries it to the map's
         local = np.array([marginals.marginalCovariance(k)[3:, 3:] for k in range(self.num_nodes)])
         rotations = poses[:, :3, :3]
         return rotations @ local @ np.swapaxes(rotations, 1, 2)
+
+    def left_out_residuals(
+        self, poses: np.ndarray, anchor_pose: np.ndarray, loop_kernel: str = "none", kernel_scale: float | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Where each loop edge ends against the graph *without it*: its leave-one-out (deleted) residual,
+        the graph linearised at ``poses`` (K x 4 x 4, its optimised poses, the loops weighed by
+        ``loop_kernel`` as the optimisation weighed them) with the first node held at ``anchor_pose``.
+        Returns ((L, 6) residuals, rotation first as GTSAM's ``Pose3.Logmap`` gives them, and (L,) their
+        Mahalanobis lengths under the loop's own information and the graph's uncertainty without it), in
+        loop-edge order.
+
+        A loop's residual at the optimum understates how far it is from the rest of the graph: the graph
+        has moved towards it, all the way when it is surer than the edges around it. With ``A`` the loop
+        factor's whitened Jacobian on its two nodes, ``b`` its right-hand side and ``P`` their joint marginal
+        covariance, leaving it out moves them by ``-P A^T S^-1 b``, ``S = I - A P A^T``, and widens ``P`` by
+        ``P A^T S^-1 A P`` (regression's deletion formulas, one linear step from the optimum); the loop's
+        plain Gaussian factor there gives the residual, and its information plus the widened ``P`` its
+        covariance. Under a kernel the other loops keep the weights the optimum gave them (optimised again
+        without the loop, they could weigh a little differently). A loop that alone joins its ends (``S``
+        singular) gets infinite ones."""
+        graph, loop_factors = self._gtsam_at(poses, anchor_pose, loop_kernel, kernel_scale)
+        values = self._values(poses)
+        marginals = self._marginals(graph, values)
+        residuals, lengths = np.full((len(loop_factors), 6), np.inf), np.full(len(loop_factors), np.inf)
+        for k, (factor, loop) in enumerate(zip(loop_factors, self._loops(), strict=True)):
+            weighed = factor.linearize(values)
+            keys = list(weighed.keys())
+            A, b = weighed.jacobian()
+            joint = marginals.jointMarginalCovariance(gtsam.KeyVector(keys))
+            P = np.block([[joint.at(row, column) for column in keys] for row in keys])
+            S = np.eye(len(b)) - A @ P @ A.T
+            if np.linalg.eigvalsh(S).min() <= 1e-9:  # the loop alone joins its ends
+                continue
+            AP = A @ P
+            move = -AP.T @ np.linalg.solve(S, b)
+            P_without = P + AP.T @ np.linalg.solve(S, AP)
+            plain_A, plain_b = loop.to_gtsam(FactorContext()).linearize(values).jacobian()
+            off = plain_A @ move - plain_b  # whitened by the loop's own information
+            spread = np.eye(len(off)) + plain_A @ P_without @ plain_A.T
+            lengths[k] = np.sqrt(max(float(off @ np.linalg.solve(spread, off)), 0.0))
+            # unwhitened through the Jacobian on the loop's second node (identity at a zero residual)
+            residuals[k] = np.linalg.solve(plain_A[:, 6 * keys.index(loop.j) :][:, :6], off)
+        return residuals, lengths
+
+    def _gtsam_at(self, poses, anchor_pose, loop_kernel, kernel_scale):
+        """:meth:`_to_gtsam` for marginals at ``poses`` (checked to be one per node)."""
+        poses = np.asarray(poses, dtype=float)
+        if poses.shape != (self.num_nodes, 4, 4):
+            raise SlamError(f"the marginals need {self.num_nodes} poses (4 x 4), got an array of {poses.shape}")
+        graph, loop_factors = self._to_gtsam(check_pose(anchor_pose, "the anchor pose"), loop_kernel, kernel_scale)
+        self._check_connected()
+        return graph, loop_factors
+
+    @staticmethod
+    def _values(poses) -> gtsam.Values:
+        values = gtsam.Values()
+        for k, pose in enumerate(np.asarray(poses, dtype=float)):
+            values.insert(k, pose3(pose))
+        return values
+
+    @staticmethod
+    def _marginals(graph, values) -> gtsam.Marginals:
+        try:
+            return gtsam.Marginals(graph, values)
+        except RuntimeError as exc:
+            raise SlamError(f"GTSAM could not compute the pose graph's marginals: {exc}") from None
 
     def _to_gtsam(self, anchor: np.ndarray, loop_kernel: str, kernel_scale: float | None):
         """GTSAM's factor graph: a prior holding node 0 at ``anchor``, then every factor in the order added,

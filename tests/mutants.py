@@ -68,11 +68,11 @@ MUTANTS = {
         '    for fix in getattr(result, "gnss_factors", None) or []:\n',
         "    for fix in []:\n",
     ),
-    "the graph answers the drift rules without testing how far the loops moved it": (
+    "the graph answers the drift rules without testing whether it bent to a loop": (
         "tests/test_health.py",
         "helpers/health.py",
-        "        if moved > FALSE_LOOP_SIGMAS:\n",
-        "        if False:\n",
+        "            if bent_pull > CORRECTION_FLOOR_M:\n",
+        "            if False:\n",
     ),
     "a run with GNSS keeps the fixed sigmas": (
         "tests/test_gnss.py",

@@ -12,6 +12,7 @@ from helpers.gnss import GnssFixes
 from helpers.graph_measures import (
     FALSE_LOOP_SIGMAS,
     correction_sigmas,
+    left_out_residuals,
     loop_residuals,
     optimized_with,
     rebuilt_poses,
@@ -250,13 +251,74 @@ def test_only_a_graph_of_calibrated_information_that_agrees_with_itself_answers_
     fixed = assess(_held_by_loops(config=Config().with_values(pose_graph={"graph_weights": "icp"})))
     assert not fixed.trusted and "too flat" in fixed.warning()
     assert fixed.counts["expected_ate_m"] is None and fixed.counts["loop_correction_sigmas"] is None
-    bent = assess(
-        _held_by_loops(config=CONFIG.with_values(pose_graph={"loop_kernel": "none"}), loops=[_loop_off_by(3.0, 0.01)])
-    )
+    run = _held_by_loops(config=CONFIG.with_values(pose_graph={"loop_kernel": "none"}), loops=[_loop_off_by(3.0, 0.01)])
+    assert max(sigmas for *_, sigmas in loop_residuals(run)) < 15  # the false loop itself ends 2.5 sigmas off
+    bent = assess(run)
     assert bent.counts["largest_correction_m"] > 2.5 and bent.counts["loop_correction_sigmas"] > FALSE_LOOP_SIGMAS
     assert not bent.trusted and "too flat" in bent.warning() and "moved the trajectory" in bent.warning()
-    assert "times the sigmas the odometry's information gives it" in bent.warning()  # why the graph did not answer
-    assert bent.counts["expected_ate_m"] is None
+    # why the graph did not answer: left out, the false loop (and the true one it pulled off) end metres away
+    assert "the graph bent to them" in bent.warning() and "29" in bent.warning()
+    assert bent.counts["n_loops_off_the_rest"] == 2 and bent.counts["expected_ate_m"] is None
+
+
+def _drifting(slip, loop_every=5, loop_sigma=0.05, config=CONFIG):
+    """A straight flight whose odometry slips ``slip`` m sideways at every step (one error, repeated: not
+    the independent errors its information, 5 cm and 0.05 deg a step, describes), every step on ground too
+    flat by ICP's constraint, and true loop edges (``loop_sigma`` m) from the first node to every
+    ``loop_every``-th."""
+    true_loops = [
+        Edge(0, k, _at(2.0 * k), 0.1, information=_info(loop_sigma)) for k in range(loop_every, NODES, loop_every)
+    ]
+    run = _run(informations=[_info(0.05)] * (NODES - 1), constraint=0.001, loops=true_loops, config=config)
+    run.odometry.relative = np.array([_at(2.0, slip)] * (NODES - 1))
+    run.odometry.poses = np.array([_at(2.0 * k, slip * k) for k in range(NODES)])
+    graph = build_pose_graph(run.odometry, [], run.loops, config)
+    run.graph = graph.optimize(anchor_pose=run.odometry.poses[0], loop_kernel=config.pose_graph.loop_kernel)
+    return run
+
+
+def test_loops_that_mend_a_drift_repeated_step_after_step_answer_the_drift_rules():
+    """An 8 cm slip repeated at every step takes the odometry 2.3 m off the line by the last node, some seven of
+    the sigmas its independent steps allow there: the loops' move is beyond them, yet every loop agrees with the
+    steps around it and with the others (each, left out, ends decimetres from the graph without it). The graph
+    answers the drift rules (over sparse tiles the odometry drifted so, and loops mended it to 0.34-0.37 m).
+    One loop at the far end alone, surer than the steps, mends the same drift, but nothing else checks it: left
+    out, it ends 2.3 m from the drifted chain, as a false loop the graph bent to would, and the run stays
+    untrusted (with no kernel, as the reference weighs loops, no loop edge ends far from the graph it bent, so
+    only the loop left out shows it)."""
+    mended = _drifting(0.08)
+    health = assess(mended)
+    assert health.counts["largest_correction_m"] > 1.5
+    assert health.counts["loop_correction_sigmas"] > FALSE_LOOP_SIGMAS  # what the rule before held against it
+    assert health.counts["n_loops_off_the_rest"] == 0
+    assert health.trusted, health.problems
+    assert max(metres for metres, *_ in left_out_residuals(mended)) < 0.5
+    no_kernel = CONFIG.with_values(pose_graph={"loop_kernel": "none"})
+    lone = _drifting(0.08, loop_every=NODES - 1, loop_sigma=0.01, config=no_kernel)
+    assert loop_residuals(lone)[0][0] < 0.1 and left_out_residuals(lone)[0][0] > 2.0
+    health = assess(lone)
+    assert health.counts["n_loops_against_graph"] == 0 and health.counts["n_loops_off_the_rest"] == 1
+    assert not health.trusted and "the graph bent to them" in health.warning()
+
+
+def test_a_loop_left_out_ends_where_the_graph_without_it_puts_it():
+    """The leave-one-out residual, one linear step from the optimum, against the graph really optimised
+    without the loop: the same to a centimetre on a graph with three loops of mixed information, each off
+    the odometry by its own amount. (No kernel: under one, leaving a loop out would also change how much
+    the others weigh, which the linear step holds as the optimum weighed them.)"""
+    loops = [
+        Edge(0, 10, _at(20.0, 0.3), 0.1, information=_info(0.05)),
+        Edge(0, 20, _at(40.0, -0.4), 0.1, information=_info(0.1)),
+        Edge(5, NODES - 1, _at(2.0 * (NODES - 6), 0.6), 0.1, information=_info(0.02)),
+    ]
+    no_kernel = CONFIG.with_values(pose_graph={"loop_kernel": "none"})
+    run = _run(informations=[_info(0.05, sigma_deg=0.02)] * (NODES - 1), loops=loops, config=no_kernel)
+    for k, (metres, _, sigmas) in enumerate(left_out_residuals(run)):
+        others = optimized_with(run, [loop for m, loop in enumerate(loops) if m != k])
+        loop = loops[k]
+        ends = np.linalg.inv(others[loop.i]) @ others[loop.j]
+        assert metres == pytest.approx(np.linalg.norm(ends[:3, 3] - loop.relative[:3, 3]), abs=0.01)
+        assert sigmas > loop_residuals(run)[k][2]  # left out, a loop is always farther than in the graph
 
 
 def test_the_loops_move_is_measured_in_the_sigmas_of_the_steps_between():
@@ -269,3 +331,8 @@ def test_the_loops_move_is_measured_in_the_sigmas_of_the_steps_between():
     assert run.graph.poses[-1, 1, 3] == pytest.approx(1.0, abs=1e-3)
     assert correction_sigmas(run) == pytest.approx(np.sqrt(NODES - 1) / (0.1 * (NODES - 1)), rel=0.01)
     assert correction_sigmas(_run(informations=sure_rotation)) == 0.0  # no loop, no move
+    # the loop ends on the optimised graph (it is far surer than the steps), but left out, 1 m off the chain,
+    # whose sideways sigma there is sqrt(29) 0.1 m: 1.86 sigmas
+    (metres, _, sigmas), *_ = left_out_residuals(run)
+    assert loop_residuals(run)[0][0] < 0.01 and metres == pytest.approx(1.0, abs=1e-3)
+    assert sigmas == pytest.approx(1.0 / np.sqrt((NODES - 1) * 0.1**2 + 0.001**2), rel=0.01)
