@@ -248,7 +248,10 @@ class PoseGraph:
             weighed = factor.linearize(values)
             keys = list(weighed.keys())
             A, b = weighed.jacobian()
-            joint = marginals.jointMarginalCovariance(gtsam.KeyVector(keys))
+            try:
+                joint = marginals.jointMarginalCovariance(gtsam.KeyVector(keys))
+            except RuntimeError as exc:
+                raise SlamError(f"GTSAM could not compute loop edge {loop.i}-{loop.j}'s marginals: {exc}") from None
             P = np.block([[joint.at(row, column) for column in keys] for row in keys])
             S = np.eye(len(b)) - A @ P @ A.T
             if np.linalg.eigvalsh(S).min() <= 1e-9:  # the loop alone joins its ends

@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from helpers.config import Config
+from helpers.errors import SlamError
 from helpers.factors import Edge
 from helpers.gnss import GnssFixes
 from helpers.graph_measures import (
@@ -336,3 +337,18 @@ def test_the_loops_move_is_measured_in_the_sigmas_of_the_steps_between():
     (metres, _, sigmas), *_ = left_out_residuals(run)
     assert loop_residuals(run)[0][0] < 0.01 and metres == pytest.approx(1.0, abs=1e-3)
     assert sigmas == pytest.approx(1.0 / np.sqrt((NODES - 1) * 0.1**2 + 0.001**2), rel=0.01)
+
+
+def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch):
+    """Where GTSAM cannot give the marginals the loops left out need, the graph does not vouch for itself: the
+    drift rules stand, and the warning says why (a run is never crashed by its own health check)."""
+    import helpers.health
+
+    def fails(result):
+        raise SlamError("indeterminant linear system")
+
+    monkeypatch.setattr(helpers.health, "loops_off_the_rest", fails)
+    health = assess(_held_by_loops())
+    assert not health.trusted and "too flat" in health.warning()
+    assert "its marginals could not be computed (indeterminant linear system)" in health.warning()
+    assert health.counts["expected_ate_m"] is None and health.counts["n_loops_off_the_rest"] is None
