@@ -28,3 +28,15 @@ def test_the_pose_graph_zoom_shows_that_window_and_a_round_scale_bar():
     bars = [artist for artist in zoom.artists if isinstance(artist, AnchoredSizeBar)]
     assert len(bars) == 1
     assert bars[0].txt_label.get_text() == "5 m"  # a round length, at most a third of 24 m
+
+
+def test_the_left_out_figure_sets_each_edges_two_residuals_side_by_side():
+    """One pair of bars per loop edge, the optimised graph's residual left of the left-out one, on a log scale."""
+    fig = graph_figures.left_out_figure(["0-50", "3-120"], [0.9, 3.0], [357.0, 4.5])
+    ax = fig.axes[0]
+    assert ax.get_yscale() == "log"
+    at_optimum, left_out = ax.containers
+    assert [bar.get_height() for bar in at_optimum] == [0.9, 3.0]
+    assert [bar.get_height() for bar in left_out] == [357.0, 4.5]
+    assert all(a.get_x() < b.get_x() for a, b in zip(at_optimum, left_out, strict=True))
+    assert [tick.get_text() for tick in ax.get_xticklabels()] == ["0-50", "3-120"]

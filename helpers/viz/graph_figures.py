@@ -243,6 +243,22 @@ def loop_weights_figure(labels, whitened, weights):
     return fig
 
 
+def left_out_figure(labels, at_optimum, left_out):
+    """Each loop edge's whitened residual (sigmas, log scale) where the optimised graph leaves it, and where
+    the graph without it would (its leave-one-out residual), side by side."""
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.6), constrained_layout=True)
+    ax.bar(x - 0.2, at_optimum, width=0.4, color=COLORS["optimized"], label="in the optimised graph")
+    ax.bar(x + 0.2, left_out, width=0.4, color=COLORS["loop"], label="left out: against the graph without it")
+    ax.set_yscale("log")
+    ax.set_xticks(x, labels, rotation=30, fontsize=9)
+    ax.set(xlabel="loop edge (older node - current node)", ylabel="residual (sigmas)")
+    ax.set_title("where each loop edge ends: in the graph, and left out of it")
+    ax.legend(loc="upper left", fontsize=9)
+    grid(ax)
+    return fig
+
+
 def bad_edge_figure(ground_truth, results: dict, bad_pair, inset=None):
     """One panel per kernel: the trajectory optimised with a deliberately
     wrong loop edge (drawn dashed black), against the ground truth."""
