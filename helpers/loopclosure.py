@@ -158,14 +158,14 @@ class LoopCloser:
         loop edge if :meth:`accepts` it. None if no submap was registered."""
         submaps, settings = self.submaps, self.settings
         # 1. Old submaps within the search radius (grown, or from the graph's uncertainty), verified by ICP.
-        covariances, centres, extents = None, submaps.centres, None
+        covariances, centres, extents, starts = None, submaps.centres, None, None
         self._follow(node, poses)
         if self.uncertainty is not None:
             try:
-                covariances, centres, extents = self._uncertain_centres(pose[:3, 3], poses)
+                covariances, centres, extents, starts = self._uncertain_centres(pose, poses)
             except SlamError as exc:  # never a crash: this query searches the grown radius instead
                 log.warning("scan %d: %s; searching the grown radius instead", node, exc)
-                covariances, centres, extents = None, submaps.centres, None
+                covariances, centres, extents, starts = None, submaps.centres, None, None
         candidates = find_loop_candidates(
             submaps.points,
             centres,
@@ -176,6 +176,7 @@ class LoopCloser:
             settings,
             covariances=covariances,
             extents=extents,
+            starts=starts,
             closed=closed_places(
                 self.loops,
                 node,
@@ -218,14 +219,19 @@ class LoopCloser:
             best_scan_constraint=pinned,
         )
 
-    def _uncertain_centres(self, position: np.ndarray, poses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """For the gate, from the scan at ``position``: each eligible submap's
+    def _uncertain_centres(self, pose: np.ndarray, poses):
+        """For the gate, from the scan at ``pose`` (its odometry pose): each eligible submap's
         centre covariance (exact where the gate may let it in, carried over
         elsewhere, NaN outside the graph's window); every submap's centre, the
         eligible ones where the graph puts them (the odometry's, moved by the
-        loop edges found); and each eligible submap's extent beyond the fixed
+        loop edges found); each eligible submap's extent beyond the fixed
         radius, how far its scans lie from its centre (a scan over any of them
-        overlaps it)."""
+        overlaps it); and, for ICP against each eligible submap, the scan's
+        pose in that submap's frame where the graph puts the two (the
+        odometry's offset moved by the loop edges found: after a loop has
+        mended a drift, the odometry's own offset to an old place can be
+        metres off; the scan's pose where the graph knows no better)."""
+        position = pose[:3, 3]
         settings, n = self.settings, self.submaps.n_scans_per_submap
         count = eligible_submaps(len(self.submaps), settings)
         nodes = [centre_scan_id(k, n) for k in range(count)]
@@ -241,7 +247,13 @@ class LoopCloser:
         where = self.uncertainty.positions(nodes)
         known = np.isfinite(where).all(axis=1)  # outside the graph's window: the odometry's centre, never searched
         centres[:count][known] = where[known]
-        return covariances, centres, extents
+        # the graph holds the current node at its odometry pose: a centre's odometry pose times its pose in the
+        # graph, inverted, carries the graph's frame into the frame the submap was built in
+        solved = self.uncertainty.solved_poses(nodes)
+        starts = np.repeat(np.asarray(pose, dtype=float)[None], count, axis=0)
+        centre_poses = np.asarray(poses, dtype=float)[nodes]
+        starts[known] = centre_poses[known] @ np.linalg.inv(solved[known]) @ pose
+        return covariances, centres, extents, starts
 
     def accepts(self, rmse: float, constraint: float) -> bool:
         """A best scan match is a loop edge if it fits (surface RMSE below

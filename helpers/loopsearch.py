@@ -172,6 +172,7 @@ def find_loop_candidates(
     covariances: np.ndarray | None = None,
     closed=(),
     extents: np.ndarray | None = None,
+    starts: np.ndarray | None = None,
 ) -> LoopCandidates:
     """Old submaps that the current scan registers onto, as the reference helper does.
 
@@ -186,7 +187,9 @@ def find_loop_candidates(
        loop closer gives the centres where the graph puts them).
     3. Sort them by distance; if the nearest is among the submap ids
        ``closed`` (a loop has just closed there), stop. Otherwise register the
-       scan to at most ``max_attempts`` of them, from ``scan_pose``.
+       scan to at most ``max_attempts`` of them, from ``scan_pose``, or from
+       ``starts[k]`` ((E, 4, 4): the scan's pose in eligible submap ``k``'s
+       frame where the loop closer's graph puts it) when given.
     4. Keep those with RMSE below ``loop_closure_threshold`` and return at most
        ``max_returned``, lowest RMSE first.
 
@@ -214,7 +217,7 @@ def find_loop_candidates(
         pose, rmse = icp_fn(
             moving=scan_points,
             fixed=submaps[submap_id],
-            T_fixed_moving=scan_pose,
+            T_fixed_moving=scan_pose if starts is None else starts[submap_id],
             max_iterations=settings.icp_max_iterations,
         )
         log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)

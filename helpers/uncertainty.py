@@ -105,6 +105,7 @@ class RelativeUncertainty:
         self._tree = None  # the window held at the anchor, eliminated: its marginals and its solution
         self._window = np.zeros(0, dtype=bool)  # node -> whether the anchor's window holds it
         self._positions = np.zeros((0, 3))  # where the graph held at the anchor puts each node (map frame)
+        self._solved = np.zeros((0, 4, 4))  # the same nodes' whole poses
         self._cached: dict[int, np.ndarray] = {}  # node -> its 6 x 6 covariance relative to the anchor
         self._exact: set[int] = set()  # the nodes whose cached covariance came from the anchor's marginals
         self._chain = np.zeros((6, 6))  # the current node relative to the anchor, along the odometry steps
@@ -215,6 +216,11 @@ class RelativeUncertainty:
         outside the window)."""
         return self._positions[np.asarray(nodes, dtype=int).ravel()]
 
+    def solved_poses(self, nodes) -> np.ndarray:
+        """(K, 4, 4) the whole poses of ``nodes`` where the graph puts them, as :meth:`positions` (NaN
+        outside the window)."""
+        return self._solved[np.asarray(nodes, dtype=int).ravel()]
+
     def _from_cache(self, nodes: np.ndarray) -> np.ndarray:
         """The position covariances of ``nodes`` relative to the current node, from the cached answers relative
         to the anchor and the chain since it (a node never computed is computed now)."""
@@ -277,8 +283,12 @@ class RelativeUncertainty:
             moved = values.retract(self._tree.optimize())
         except RuntimeError as exc:  # an indeterminant system: some node joined by no edge
             raise SlamError(f"the loop search's graph cannot be solved: {exc}") from None
-        self._positions = np.full((self.num_nodes, 3), np.nan)
-        self._positions[window] = gtsam.utilities.extractPose3(moved)[:, 9:12]  # rows [R (9), t (3)], sorted keys
+        rows = gtsam.utilities.extractPose3(moved)  # rows [R (9, row by row), t (3)], sorted keys
+        self._solved = np.full((self.num_nodes, 4, 4), np.nan)
+        self._solved[window] = np.eye(4)
+        self._solved[window, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
+        self._solved[window, :3, 3] = rows[:, 9:12]
+        self._positions = self._solved[:, :3, 3].copy()
         kept = np.array([c for c in self._cached if c < anchor], dtype=int)  # outside the window too: still valid
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))

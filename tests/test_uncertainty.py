@@ -371,3 +371,57 @@ def test_the_whole_graph_it_hands_out_gives_gtsams_own_marginals():
     sigma = gtsam.Marginals(held, windowed.values).marginalCovariance(30)
     R = poses[30][:3, :3]
     np.testing.assert_allclose(windowed.position_covariances([30])[0], R @ sigma[3:, 3:] @ R.T, rtol=1e-5)
+
+
+class TrueIcp:
+    """ICP that always lands on the truth, whatever its start: a submap (map frame) gets the current scan's true
+    pose (``truth``, set before each scan is added), old scan ``i`` (a cloud of four points at ``(i, i, i)``) the
+    true pose relative to it (``truths``); it records every start it was given for a submap."""
+
+    def __init__(self):
+        self.node, self.truth, self.truths, self.starts = None, None, [], []
+
+    def __call__(self, *, moving, fixed, T_fixed_moving, max_iterations=None):
+        if len(fixed) == 4 and np.all(fixed == fixed[0, 0]):  # old scan i
+            return np.linalg.inv(self.truths[int(fixed[0, 0])]) @ self.truth, 0.1
+        self.starts.append((self.node, T_fixed_moving.copy()))
+        return self.truth, 0.1
+
+    def constraint(self, **_):
+        return 1.0
+
+
+def test_after_a_loop_icp_starts_where_the_graph_puts_the_scan():
+    """Out along x and back over the same line, the odometry of the way back 2 m to the side of the truth
+    (the way out is exact, and the submaps are built on it). The first revisit can only start ICP from the
+    odometry, 2 m off; its loop edge tells the graph where the way back lies, and every later query starts
+    ICP there: decimetres from the truth after the first loops, centimetres once more have closed, never from
+    the odometry's pose 2 m away."""
+    from helpers.config import Config
+    from helpers.loopclosure import LoopCloser
+
+    settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "search": "uncertainty", "skip_after_loop": 0})
+    icp = TrueIcp()
+    closer = LoopCloser(settings.loop_closure, settings.map, icp, settings.pose_graph)
+    n_out = 30
+    xs = np.r_[6.0 * np.arange(n_out), 6.0 * np.arange(n_out - 1, -1, -1) + 1.0]
+    poses, clouds = [], []
+    for node, x in enumerate(xs):
+        truth = step(x)
+        odometry = truth.copy()
+        if node >= n_out:
+            odometry[1, 3] += 2.0  # the way back drifted 2 m to the side
+        poses.append(odometry)
+        icp.truths.append(truth)
+        clouds.append(np.full((4, 3), float(node)))
+        icp.truth, icp.node = truth, node
+        closer.add(node, clouds[-1], poses[-1], clouds, np.array(poses))
+    loops = closer.loops
+    assert len(loops) > 10
+    first = loops[0].j
+    offsets = {node: np.linalg.norm(start[:3, 3] - icp.truths[node][:3, 3]) for node, start in icp.starts}
+    assert offsets[first] == pytest.approx(2.0, abs=1e-6)  # nothing told the graph yet
+    later = [offset for node, offset in offsets.items() if node > first]
+    # the first loop edges move the old places part of the way (weighed against the chain of steps); the more
+    # loops, the nearer the truth
+    assert len(later) > 10 and max(later) < 0.5 and np.median(later) < 0.05
