@@ -74,6 +74,12 @@ MUTANTS = {
         "            if bent_pull > CORRECTION_FLOOR_M:\n",
         "            if False:\n",
     ),
+    "the loop search starts ICP from the odometry pose": (
+        "tests/test_uncertainty.py",
+        "helpers/loopsearch.py",
+        "            T_fixed_moving=scan_pose if starts is None else starts[submap_id],\n",
+        "            T_fixed_moving=scan_pose,\n",
+    ),
     "a run with GNSS keeps the fixed sigmas": (
         "tests/test_gnss.py",
         "helpers/fitting.py",
