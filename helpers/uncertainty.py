@@ -104,8 +104,7 @@ class RelativeUncertainty:
         self._anchor: int | None = None  # the node the cached marginals are relative to
         self._tree = None  # the window held at the anchor, eliminated: its marginals and its solution
         self._window = np.zeros(0, dtype=bool)  # node -> whether the anchor's window holds it
-        self._positions = np.zeros((0, 3))  # where the graph held at the anchor puts each node (map frame)
-        self._solved = np.zeros((0, 4, 4))  # the same nodes' whole poses
+        self._solved = np.zeros((0, 4, 4))  # where the graph held at the anchor puts each node (map frame)
         self._cached: dict[int, np.ndarray] = {}  # node -> its 6 x 6 covariance relative to the anchor
         self._exact: set[int] = set()  # the nodes whose cached covariance came from the anchor's marginals
         self._chain = np.zeros((6, 6))  # the current node relative to the anchor, along the odometry steps
@@ -214,7 +213,7 @@ class RelativeUncertainty:
         odometry position: the odometry's positions moved by the loop edges
         (call after :meth:`position_covariances`, which computes them; NaN
         outside the window)."""
-        return self._positions[np.asarray(nodes, dtype=int).ravel()]
+        return self._solved[np.asarray(nodes, dtype=int).ravel(), :3, 3]
 
     def solved_poses(self, nodes) -> np.ndarray:
         """(K, 4, 4) the whole poses of ``nodes`` where the graph puts them, as :meth:`positions` (NaN
@@ -288,7 +287,6 @@ class RelativeUncertainty:
         self._solved[window] = np.eye(4)
         self._solved[window, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
         self._solved[window, :3, 3] = rows[:, 9:12]
-        self._positions = self._solved[:, :3, 3].copy()
         kept = np.array([c for c in self._cached if c < anchor], dtype=int)  # outside the window too: still valid
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
