@@ -10,7 +10,8 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from .factors import pose3
+from .errors import SlamError
+from .factors import FactorContext, pose3
 from .information import TRANSLATION_FIRST, whitened
 from .loopclosure import radius_after
 
@@ -70,17 +71,62 @@ def correction_sigmas(result, rebuilt=None, without=None) -> float:
 
 def left_out_residuals(result) -> list[tuple[float, float, float]]:
     """Per loop edge: how far it ends from where the run's graph *without it* puts it, (m, deg, sigmas)
-    (:meth:`helpers.posegraph.PoseGraph.left_out_residuals`, in the graph the run optimised: its edges,
-    loops and GNSS fixes, at its optimised poses). Unlike :func:`loop_residuals` it sees a loop the graph
-    bent to: surer than the steps around it, such a loop ends near the optimised graph, but far from the
-    graph without it. Raises :class:`helpers.errors.SlamError` when GTSAM cannot compute the marginals."""
+    (:func:`deleted_residuals` in the graph the run optimised: its edges, loops and GNSS fixes, at its
+    optimised poses). Unlike :func:`loop_residuals` it sees a loop the graph bent to: surer than the steps
+    around it, such a loop ends near the optimised graph, but far from the graph without it. Raises
+    :class:`helpers.errors.SlamError` when GTSAM cannot compute the marginals."""
     if not result.loops:
         return []
-    residuals, lengths = _graph_as_run(result).left_out_residuals(
-        result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
+    residuals, lengths = deleted_residuals(
+        _graph_as_run(result),
+        result.graph.poses,
+        result.graph.initial_poses[0],
+        loop_kernel=result.config.pose_graph.loop_kernel,
     )
     metres, degrees = np.linalg.norm(residuals[:, 3:], axis=1), np.degrees(np.linalg.norm(residuals[:, :3], axis=1))
     return [(float(m), float(d), float(n)) for m, d, n in zip(metres, degrees, lengths, strict=True)]
+
+
+def deleted_residuals(graph, poses, anchor_pose, loop_kernel: str = "none") -> tuple[np.ndarray, np.ndarray]:
+    """Where each loop edge of ``graph`` (a :class:`helpers.posegraph.PoseGraph`) ends against the graph
+    *without it*: its leave-one-out (deleted) residual, the graph linearised at ``poses`` (its optimised
+    poses, the loops weighed by ``loop_kernel`` as the optimisation weighed them) with the first node held
+    at ``anchor_pose``. Returns ((L, 6) residuals, rotation first as GTSAM's ``Pose3.Logmap`` gives them,
+    and (L,) their Mahalanobis lengths under the loop's own information and the graph's uncertainty without
+    it), in loop-edge order.
+
+    A loop's residual at the optimum understates how far it is from the rest of the graph: the graph has
+    moved towards it, all the way when it is surer than the edges around it. With ``A`` the loop factor's
+    whitened Jacobian on its two nodes, ``b`` its right-hand side and ``P`` their joint marginal covariance,
+    leaving it out moves them by ``-P A^T S^-1 b``, ``S = I - A P A^T``, and widens ``P`` by
+    ``P A^T S^-1 A P`` (regression's deletion formulas, one linear step from the optimum); the loop's plain
+    Gaussian factor there gives the residual, and its information plus the widened ``P`` its covariance.
+    Under a kernel the other loops keep the weights the optimum gave them (optimised again without the loop,
+    they could weigh a little differently). A loop that alone joins its ends (``S`` singular) gets infinite
+    ones. Raises :class:`helpers.errors.SlamError` when GTSAM cannot compute the marginals."""
+    loops, loop_factors, values, marginals = graph.linearised(poses, anchor_pose, loop_kernel)
+    residuals, lengths = np.full((len(loops), 6), np.inf), np.full(len(loops), np.inf)
+    for k, (factor, loop) in enumerate(zip(loop_factors, loops, strict=True)):
+        A, b = factor.linearize(values).jacobian()
+        keys = list(factor.keys())
+        try:
+            joint = marginals.jointMarginalCovariance(gtsam.KeyVector(keys))
+        except RuntimeError as exc:
+            raise SlamError(f"GTSAM could not compute loop edge {loop.i}-{loop.j}'s marginals: {exc}") from None
+        P = np.block([[joint.at(row, column) for column in keys] for row in keys])
+        S = np.eye(len(b)) - A @ P @ A.T
+        if np.linalg.eigvalsh(S).min() <= 1e-9:  # the loop alone joins its ends
+            continue
+        AP = A @ P
+        move = -AP.T @ np.linalg.solve(S, b)
+        P_without = P + AP.T @ np.linalg.solve(S, AP)
+        plain_A, plain_b = loop.to_gtsam(FactorContext()).linearize(values).jacobian()
+        off = plain_A @ move - plain_b  # whitened by the loop's own information
+        spread = np.eye(len(off)) + plain_A @ P_without @ plain_A.T
+        lengths[k] = np.sqrt(max(float(off @ np.linalg.solve(spread, off)), 0.0))
+        # unwhitened through the Jacobian on the loop's second node (identity at a zero residual)
+        residuals[k] = np.linalg.solve(plain_A[:, 6 * keys.index(loop.j) :][:, :6], off)
+    return residuals, lengths
 
 
 def loops_off_the_rest(result) -> list[tuple[object, tuple[float, float, float]]]:

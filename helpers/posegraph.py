@@ -221,51 +221,16 @@ class PoseGraph:
         rotations = poses[:, :3, :3]
         return rotations @ local @ np.swapaxes(rotations, 1, 2)
 
-    def left_out_residuals(
+    def linearised(
         self, poses: np.ndarray, anchor_pose: np.ndarray, loop_kernel: str = "none", kernel_scale: float | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Where each loop edge ends against the graph *without it*: its leave-one-out (deleted) residual,
-        the graph linearised at ``poses`` (K x 4 x 4, its optimised poses, the loops weighed by
-        ``loop_kernel`` as the optimisation weighed them) with the first node held at ``anchor_pose``.
-        Returns ((L, 6) residuals, rotation first as GTSAM's ``Pose3.Logmap`` gives them, and (L,) their
-        Mahalanobis lengths under the loop's own information and the graph's uncertainty without it), in
-        loop-edge order.
-
-        A loop's residual at the optimum understates how far it is from the rest of the graph: the graph
-        has moved towards it, all the way when it is surer than the edges around it. With ``A`` the loop
-        factor's whitened Jacobian on its two nodes, ``b`` its right-hand side and ``P`` their joint marginal
-        covariance, leaving it out moves them by ``-P A^T S^-1 b``, ``S = I - A P A^T``, and widens ``P`` by
-        ``P A^T S^-1 A P`` (regression's deletion formulas, one linear step from the optimum); the loop's
-        plain Gaussian factor there gives the residual, and its information plus the widened ``P`` its
-        covariance. Under a kernel the other loops keep the weights the optimum gave them (optimised again
-        without the loop, they could weigh a little differently). A loop that alone joins its ends (``S``
-        singular) gets infinite ones."""
+    ) -> tuple[list[LoopFactor], list, gtsam.Values, gtsam.Marginals]:
+        """The graph as GTSAM sees it at ``poses`` (K x 4 x 4, its optimised poses) with the first node held at
+        ``anchor_pose``: the loop edges (ours, in the order added), their GTSAM factors (wrapped in
+        ``loop_kernel``), the values and the marginals, for measures that linearise single factors
+        (:func:`helpers.graph_measures.left_out_residuals`)."""
         graph, loop_factors = self._gtsam_at(poses, anchor_pose, loop_kernel, kernel_scale)
         values = self._values(poses)
-        marginals = self._marginals(graph, values)
-        residuals, lengths = np.full((len(loop_factors), 6), np.inf), np.full(len(loop_factors), np.inf)
-        for k, (factor, loop) in enumerate(zip(loop_factors, self._loops(), strict=True)):
-            weighed = factor.linearize(values)
-            keys = list(weighed.keys())
-            A, b = weighed.jacobian()
-            try:
-                joint = marginals.jointMarginalCovariance(gtsam.KeyVector(keys))
-            except RuntimeError as exc:
-                raise SlamError(f"GTSAM could not compute loop edge {loop.i}-{loop.j}'s marginals: {exc}") from None
-            P = np.block([[joint.at(row, column) for column in keys] for row in keys])
-            S = np.eye(len(b)) - A @ P @ A.T
-            if np.linalg.eigvalsh(S).min() <= 1e-9:  # the loop alone joins its ends
-                continue
-            AP = A @ P
-            move = -AP.T @ np.linalg.solve(S, b)
-            P_without = P + AP.T @ np.linalg.solve(S, AP)
-            plain_A, plain_b = loop.to_gtsam(FactorContext()).linearize(values).jacobian()
-            off = plain_A @ move - plain_b  # whitened by the loop's own information
-            spread = np.eye(len(off)) + plain_A @ P_without @ plain_A.T
-            lengths[k] = np.sqrt(max(float(off @ np.linalg.solve(spread, off)), 0.0))
-            # unwhitened through the Jacobian on the loop's second node (identity at a zero residual)
-            residuals[k] = np.linalg.solve(plain_A[:, 6 * keys.index(loop.j) :][:, :6], off)
-        return residuals, lengths
+        return self._loops(), loop_factors, values, self._marginals(graph, values)
 
     def _gtsam_at(self, poses, anchor_pose, loop_kernel, kernel_scale):
         """:meth:`_to_gtsam` for marginals at ``poses`` (checked to be one per node)."""
