@@ -103,6 +103,9 @@ WEAK_SIGMA_M = 0.5  # m: a step whose weakest direction is this loose was not pi
 MAX_EXPECTED_ATE_M = 0.5  # m: the ATE the graph expects of itself, held by GNSS fixes or by loops, may be at most this
 # (half of issue 21's 1 m: on six low flights with 2 m or 10 m fixes at every scan the ATE was 0.9-1.35 times the
 # expected one; lidar only, on 13 low flights whose loops mended them, 0.6-2.0 times: benchmarks/bench_flights.py)
+BLIND_RUN_STEPS = 5  # steps in a row that fell back to the last motion: a turn begun there goes unseen
+# (the sparse tile of scene seed 5 at 150 m: a turn of 2.8 degrees a step began over its lake, 22 steps with no
+# match missed 56 degrees of it, and no revisit closed a loop)
 CORRECTION_FLOOR_M = 0.35  # m: loops moving no pose by more than this (all of them, or the false ones) leave less
 # drift than issue 21 asks of a run at all (0.35 m on the 700 m scenes), whatever the distance flown
 
@@ -243,11 +246,23 @@ def assess(result) -> Health:
         )
     if not held and revisited >= config.map.n_scans_per_submap and unclosed > revisited / 2:
         needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
+        blind = runs_of(result.indices, fallbacks, BLIND_RUN_STEPS)
+        cause = (
+            f"odometry steps {BLIND_RUN_STEPS} or more in a row (scans "
+            + ", ".join(f"{first}-{last}" for first, last in blind[:6])
+            + (", ..." if len(blind) > 6 else "")
+            + ") could not be registered and followed the last motion: a turn begun there went unseen, and "
+            "the odometry came back too far from where it flew for the loop search (featureless ground under "
+            "the whole strip: water, a field). Add GNSS fixes (run --gnss FILE), or fly higher, so that each "
+            "scan sees ground with relief."
+            if blind
+            else f"a loop candidate must be older than [loop_closure] sub_map_thresh = {loops.sub_map_thresh} "
+            f"submaps (about {needed} accepted scans), or the scans do not match within loop_closure_threshold. "
+            "Try a smaller sub_map_thresh."
+        )
         problems.append(
             f"{revisited} accepted scans come back over ground flown earlier, and {unclosed} of them closed no "
-            "loop, so the drift stays in the map. Likely cause: a loop candidate must be older than "
-            f"[loop_closure] sub_map_thresh = {loops.sub_map_thresh} submaps (about {needed} accepted scans), "
-            "or the scans do not match within loop_closure_threshold. Try a smaller sub_map_thresh."
+            f"loop, so the drift stays in the map. Likely cause: {cause}"
         )
     if not held and drifted:
         share = f", {correction / flown:.1%} of the {flown:.0f} m flown" if flown > 0 else " (the flight hovered)"
@@ -304,6 +319,20 @@ def weak_sigmas(odometry) -> np.ndarray:
     if len(informations) != len(odometry.relative):
         informations = [None] * len(odometry.relative)
     return np.array([np.nan if info is None else weakest(info)[0] for info in informations], dtype=float)
+
+
+def runs_of(indices, chosen, length: int) -> list[tuple[int, int]]:
+    """The runs of at least ``length`` consecutive accepted scans (``indices``, the run's, ascending) that are
+    all in ``chosen`` (scan indices): (first scan, last scan) each, in order."""
+    at = np.flatnonzero(np.isin(indices, chosen))
+    breaks = np.flatnonzero(np.diff(at) > 1)
+    starts, ends = np.r_[0, breaks + 1], np.r_[breaks, len(at) - 1]
+    indices = np.asarray(indices)
+    return [
+        (int(indices[at[start]]), int(indices[at[end]]))
+        for start, end in zip(starts, ends, strict=True)
+        if len(at) and end - start + 1 >= length
+    ]
 
 
 def _some(indices, shown: int = 6) -> str:

@@ -18,7 +18,7 @@ from helpers.graph_measures import (
     optimized_with,
     rebuilt_poses,
 )
-from helpers.health import CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
+from helpers.health import BLIND_RUN_STEPS, CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
 from helpers.information import calibrated
 from helpers.odometry import OdometryResult
 from helpers.slam import build_pose_graph
@@ -97,6 +97,52 @@ def test_a_step_on_ground_too_flat_is_weak_whatever_its_information_says():
     for informations in (None, [None] * (NODES - 1)):
         health = assess(_run(informations=informations, constraint=0.001))
         assert health.counts["n_weak_steps"] == NODES - 1 and not health.trusted
+
+
+def _out_and_back(fell_back):
+    """A flight 25 steps of 2 m out along x and 25 back along y = 4 m (over the ground it flew, beyond the
+    loop search's fixed radius times LEFT_FACTOR from where it turned), closing no loop; the steps at
+    positions ``fell_back`` registered by no fit and followed the last motion."""
+    turn = np.diag([-1.0, -1.0, 1.0, 1.0])
+    turn[1, 3] = 4.0
+    relative = np.array([_at(2.0)] * 25 + [turn] + [_at(2.0)] * 24)
+    poses = np.eye(4)[None]
+    for step in relative:
+        poses = np.concatenate([poses, [poses[-1] @ step]])
+    indices = np.arange(len(poses)) * 3
+    odometry = OdometryResult(
+        indices=indices,
+        poses=poses,
+        relative=relative,
+        n_matches=np.full(len(relative), 100),
+        n_inliers=np.full(len(relative), 50),
+        rmse=np.full(len(relative), 0.2),
+        timings={},
+        fallbacks=[(int(indices[k + 1]), "robust fit failed; ICP started from the previous motion") for k in fell_back],
+        constraint=np.full(len(relative), 0.5),
+        information=[_info(0.05)] * len(relative),
+    )
+    graph = build_pose_graph(odometry, [], [], CONFIG).optimize(anchor_pose=poses[0])
+    return SimpleNamespace(
+        config=CONFIG, indices=indices, odometry=odometry, graph=graph, loops=[], queries=[], extra_edges=[],
+        edges_back_tried=0, gnss_factors=[],
+    )  # fmt: skip
+
+
+def test_revisits_after_a_blind_stretch_name_it_not_the_loop_settings():
+    """Revisits closing no loop after BLIND_RUN_STEPS steps in a row that followed the last motion: the
+    likely cause named is that stretch (a turn there goes unseen), with GNSS as the way out; the same
+    number of fallbacks scattered leaves the loop settings as the likely cause. Too few fall back for
+    the fallback rule (at most a tenth), so the revisit rule alone speaks."""
+    in_a_row = assess(_out_and_back(range(10, 10 + BLIND_RUN_STEPS)))
+    scattered = assess(_out_and_back(range(3, 3 + 4 * BLIND_RUN_STEPS, 4)))
+    for health in (in_a_row, scattered):
+        c = health.counts
+        assert c["n_fallbacks"] == BLIND_RUN_STEPS and c["n_revisits_unclosed"] == c["n_revisits"] >= 3
+        assert not health.trusted and len(health.problems) == 1, health.problems
+    assert f"in a row (scans {3 * 11}-{3 * (10 + BLIND_RUN_STEPS)})" in in_a_row.warning()
+    assert "--gnss" in in_a_row.warning() and "sub_map_thresh" not in in_a_row.warning()
+    assert "sub_map_thresh" in scattered.warning() and "in a row" not in scattered.warning()
 
 
 def _loop_off_by(metres, sigma_m):
