@@ -168,7 +168,12 @@ def assess(result) -> Health:
     rebuilt = rebuilt_poses(result) if result.loops else None  # the loop measures start from it ...
     without = optimized_with(result, []) if result.loops else None  # ... and from the graph without loops
     held = bool(getattr(result, "gnss_factors", None))  # GNSS fixes hold every node: drift stays out of the map
-    expected = expected_ate(result) if held else None
+    expected, unknown = None, ""  # the ATE the graph expects of itself, or why GTSAM could not say
+    if held:
+        try:
+            expected = expected_ate(result)
+        except SlamError as exc:  # no marginals, no answer: the fixes cannot vouch for the run
+            unknown = str(exc)
     correction = loop_correction(result, rebuilt, without)
     against = loops_against_graph(result)
     pull = loop_pull(result, against, rebuilt)
@@ -273,7 +278,13 @@ def assess(result) -> Health:
             "little overlap). Fly higher, or over the same ground more than once, so that loops close in more places."
         )
         drift.append(len(problems) - 1)
-    if held and expected > MAX_EXPECTED_ATE_M:
+    if held and expected is None:
+        problems.append(
+            f"With {len(result.gnss_factors)} GNSS fixes the graph could not say how far off it expects its "
+            f"trajectory to be ({unknown}). Likely cause: nodes that neither the steps nor the fixes pin "
+            "(a direction no edge holds). Check the GNSS file's scan indices and sigmas."
+        )
+    if held and expected is not None and expected > MAX_EXPECTED_ATE_M:
         problems.append(
             f"With {len(result.gnss_factors)} GNSS fixes the graph expects its trajectory to be {expected:.2f} m off "
             f"(root mean square of its nodes' position sigmas), more than {MAX_EXPECTED_ATE_M} m. Likely cause: "
@@ -286,8 +297,8 @@ def assess(result) -> Health:
         # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
         # the rest, judged against the graph without it (a graph bent to a loop sits close to it), unless the
         # kernel set it aside.
-        counts["loop_correction_sigmas"] = round(correction_sigmas(result, rebuilt, without), 2)
         try:
+            counts["loop_correction_sigmas"] = round(correction_sigmas(result, rebuilt, without), 2)
             bent = loops_off_the_rest(result)
         except SlamError as exc:  # no marginals, no answer
             bent, why = None, f"its marginals could not be computed ({exc})"
@@ -303,9 +314,12 @@ def assess(result) -> Health:
                     f"move it by {bent_pull:.2f} m: the graph bent to them, so it cannot vouch for itself"
                 )
             else:
-                expected = expected_ate(result)
-                counts["expected_ate_m"] = round(expected, 3)
-                why = f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
+                try:
+                    expected = expected_ate(result)
+                    counts["expected_ate_m"] = round(expected, 3)
+                    why = f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
+                except SlamError as exc:
+                    why = f"its marginals could not be computed ({exc})"
         if expected is not None and expected <= MAX_EXPECTED_ATE_M:
             problems = [problem for k, problem in enumerate(problems) if k not in drift]
         else:  # the last word of the drift rules says why the graph could not answer them

@@ -385,16 +385,32 @@ def test_the_loops_move_is_measured_in_the_sigmas_of_the_steps_between():
     assert sigmas == pytest.approx(1.0 / np.sqrt((NODES - 1) * 0.1**2 + 0.001**2), rel=0.01)
 
 
-def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch):
-    """Where GTSAM cannot give the marginals the loops left out need, the graph does not vouch for itself: the
-    drift rules stand, and the warning says why (a run is never crashed by its own health check)."""
+@pytest.mark.parametrize("measure", ["loops_off_the_rest", "correction_sigmas", "expected_ate"])
+def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch, measure):
+    """Where GTSAM cannot give the marginals a measure of the graph needs (the loops left out, the loops' move
+    in sigmas, the ATE it expects of itself), the graph does not vouch for itself: the drift rules stand, and
+    the warning says why (a run is never crashed by its own health check)."""
+    import helpers.health
+
+    def fails(*args, **kwargs):
+        raise SlamError("indeterminant linear system")
+
+    monkeypatch.setattr(helpers.health, measure, fails)
+    health = assess(_held_by_loops())
+    assert not health.trusted and "too flat" in health.warning()
+    assert "its marginals could not be computed (indeterminant linear system)" in health.warning()
+    assert health.counts["expected_ate_m"] is None
+
+
+def test_gnss_fixes_whose_graph_cannot_say_how_sure_it_is_leave_a_run_untrusted(monkeypatch):
+    """The run of test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing, trusted with 0.3 m fixes, when
+    GTSAM cannot give the graph's marginals: not trusted, and the warning says so."""
     import helpers.health
 
     def fails(result):
         raise SlamError("indeterminant linear system")
 
-    monkeypatch.setattr(helpers.health, "loops_off_the_rest", fails)
-    health = assess(_held_by_loops())
-    assert not health.trusted and "too flat" in health.warning()
-    assert "its marginals could not be computed (indeterminant linear system)" in health.warning()
-    assert health.counts["expected_ate_m"] is None and health.counts["n_loops_off_the_rest"] is None
+    monkeypatch.setattr(helpers.health, "expected_ate", fails)
+    health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(0.3)))
+    assert not health.trusted and health.counts["expected_ate_m"] is None
+    assert "could not say how far off" in health.warning() and "indeterminant linear system" in health.warning()
