@@ -22,7 +22,9 @@ A run is *not trusted* when
   (without a robust kernel it bends the map; one the kernel set aside all
   but entirely is counted, not held against the run), or
 - the estimated trajectory comes back over places it left and no loop was
-  closed at most of them (the drift then stays in the map), or
+  closed at most of them (the drift then stays in the map; where
+  :data:`BLIND_RUN_STEPS` or more steps in a row fell back before, the
+  message names them, :func:`runs_of`, as the likely cause), or
 - the loop edges moved the trajectory (against the same graph without them)
   by more than :data:`MAX_CORRECTION_SHARE` of the distance flown, and by more
   than :data:`CORRECTION_FLOOR_M` (a hovering flight flies no distance): the
@@ -297,34 +299,41 @@ def assess(result) -> Health:
         # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
         # the rest, judged against the graph without it (a graph bent to a loop sits close to it), unless the
         # kernel set it aside.
-        try:
-            counts["loop_correction_sigmas"] = round(correction_sigmas(result, rebuilt, without), 2)
-            bent = loops_off_the_rest(result)
-        except SlamError as exc:  # no marginals, no answer
-            bent, why = None, f"its marginals could not be computed ({exc})"
-        if bent is not None:
-            bent_pull = loop_pull(result, [loop for loop, _ in bent], rebuilt)
-            counts["n_loops_off_the_rest"] = len(bent)
-            if bent_pull > CORRECTION_FLOOR_M:
-                pairs = ", ".join(f"{loop.i}-{loop.j}" for loop, _ in bent[:4]) + (", ..." if len(bent) > 4 else "")
-                farthest = max(residual[0] for _, residual in bent)
-                why = (
-                    f"{len(bent)} loop edges (nodes {pairs}) end up to {farthest:.2f} m, more than "
-                    f"{FALSE_LOOP_SIGMAS:g} sigmas, from where the graph without each of them puts them, and they "
-                    f"move it by {bent_pull:.2f} m: the graph bent to them, so it cannot vouch for itself"
-                )
-            else:
-                try:
-                    expected = expected_ate(result)
-                    counts["expected_ate_m"] = round(expected, 3)
-                    why = f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
-                except SlamError as exc:
-                    why = f"its marginals could not be computed ({exc})"
+        expected, why = graph_answer(result, rebuilt, without, counts)
         if expected is not None and expected <= MAX_EXPECTED_ATE_M:
             problems = [problem for k, problem in enumerate(problems) if k not in drift]
         else:  # the last word of the drift rules says why the graph could not answer them
             problems[drift[-1]] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
     return Health(counts, problems)
+
+
+def graph_answer(result, rebuilt, without, counts: dict) -> tuple[float | None, str]:
+    """Whether a lidar-only run's graph may answer the drift rules (the module says when): the ATE it expects
+    of itself and why it does not answer when that is too much, or None and why it cannot answer at all.
+    ``rebuilt`` and ``without`` as :func:`helpers.graph_measures.loop_correction` takes them; the measures
+    are written into ``counts`` as they are made. Where GTSAM cannot give the marginals, there is no answer,
+    never an error: a run is not crashed by its own health check."""
+    try:
+        counts["loop_correction_sigmas"] = round(correction_sigmas(result, rebuilt, without), 2)
+        bent = loops_off_the_rest(result)
+    except SlamError as exc:
+        return None, f"its marginals could not be computed ({exc})"
+    bent_pull = loop_pull(result, [loop for loop, _ in bent], rebuilt)
+    counts["n_loops_off_the_rest"] = len(bent)
+    if bent_pull > CORRECTION_FLOOR_M:
+        pairs = ", ".join(f"{loop.i}-{loop.j}" for loop, _ in bent[:4]) + (", ..." if len(bent) > 4 else "")
+        farthest = max(residual[0] for _, residual in bent)
+        return None, (
+            f"{len(bent)} loop edges (nodes {pairs}) end up to {farthest:.2f} m, more than "
+            f"{FALSE_LOOP_SIGMAS:g} sigmas, from where the graph without each of them puts them, and they "
+            f"move it by {bent_pull:.2f} m: the graph bent to them, so it cannot vouch for itself"
+        )
+    try:
+        expected = expected_ate(result)
+    except SlamError as exc:
+        return None, f"its marginals could not be computed ({exc})"
+    counts["expected_ate_m"] = round(expected, 3)
+    return expected, f"it expects its trajectory to be {expected:.2f} m off, more than {MAX_EXPECTED_ATE_M} m"
 
 
 def weak_sigmas(odometry) -> np.ndarray:
@@ -339,13 +348,15 @@ def runs_of(indices, chosen, length: int) -> list[tuple[int, int]]:
     """The runs of at least ``length`` consecutive accepted scans (``indices``, the run's, ascending) that are
     all in ``chosen`` (scan indices): (first scan, last scan) each, in order."""
     at = np.flatnonzero(np.isin(indices, chosen))
+    if not len(at):
+        return []
     breaks = np.flatnonzero(np.diff(at) > 1)
     starts, ends = np.r_[0, breaks + 1], np.r_[breaks, len(at) - 1]
     indices = np.asarray(indices)
     return [
         (int(indices[at[start]]), int(indices[at[end]]))
         for start, end in zip(starts, ends, strict=True)
-        if len(at) and end - start + 1 >= length
+        if end - start + 1 >= length
     ]
 
 

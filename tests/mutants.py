@@ -71,8 +71,8 @@ MUTANTS = {
     "the graph answers the drift rules without testing whether it bent to a loop": (
         "tests/test_health.py",
         "helpers/health.py",
-        "            if bent_pull > CORRECTION_FLOOR_M:\n",
-        "            if False:\n",
+        "    if bent_pull > CORRECTION_FLOOR_M:\n",
+        "    if False:\n",
     ),
     "the loop search starts ICP from the odometry pose": (
         "tests/test_uncertainty.py",
