@@ -94,7 +94,6 @@ from .graph_measures import (
 )
 from .icp import WEAK_CONSTRAINT
 from .information import weakest
-from .sensor import index_ranges
 
 MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
 MAX_CORRECTION_SHARE = 0.01  # loops moving a pose by more than this share of the distance flown: weak odometry
@@ -206,7 +205,7 @@ def assess(result) -> Health:
     if not held and steps and len(fallbacks) > MAX_FALLBACK_SHARE * steps:
         problems.append(
             f"{len(fallbacks)} of {steps} odometry steps ({len(fallbacks) / steps:.0%}) could not be registered "
-            f"and fell back to the previous motion (scans {_some(fallbacks)}). Likely cause: "
+            f"and fell back to the previous motion (scans {_some(result.indices, fallbacks)}). Likely cause: "
             "consecutive accepted scans share too little ground (a low flight, a narrow sensor or waypoints far "
             "apart), or too few points for their descriptors. "
             + (
@@ -219,15 +218,15 @@ def assess(result) -> Health:
     if len(poor):
         problems.append(
             f"{len(poor)} odometry steps kept an ICP RMSE above {fit.icp_fallback_rmse} m (scans "
-            f"{_some(poor)}): the trajectory may break there. Likely cause: too little overlap or too few "
-            "points. Try a smaller [registration] skip_frames or [features] grid_step."
+            f"{_some(result.indices, poor)}): the trajectory may break there. Likely cause: too little overlap or "
+            "too few points. Try a smaller [registration] skip_frames or [features] grid_step."
         )
     if not held and steps and len(weak) > MAX_FALLBACK_SHARE * steps:
         problems.append(
             f"{len(weak)} of {steps} odometry steps ({len(weak) / steps:.0%}) were registered on ground too flat "
-            f"to pin the motion along it (scans {_some(weak)}): ICP may slide there, and the trajectory drift "
-            "unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a narrow strip. "
-            "Fly higher, so that each scan sees more relief."
+            f"to pin the motion along it (scans {_some(result.indices, weak)}): ICP may slide there, and the "
+            "trajectory drift unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a "
+            "narrow strip. Fly higher, so that each scan sees more relief."
         )
         drift.append(len(problems) - 1)
     drifted = correction > max(MAX_CORRECTION_SHARE * flown, CORRECTION_FLOOR_M)  # the last rule below
@@ -255,13 +254,10 @@ def assess(result) -> Health:
         needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
         blind = runs_of(result.indices, fallbacks, BLIND_RUN_STEPS)
         cause = (
-            f"odometry steps {BLIND_RUN_STEPS} or more in a row (scans "
-            + ", ".join(f"{first}-{last}" for first, last in blind[:6])
-            + (", ..." if len(blind) > 6 else "")
-            + ") could not be registered and followed the last motion: a turn begun there went unseen, and "
-            "the odometry came back too far from where it flew for the loop search (featureless ground under "
-            "the whole strip: water, a field). Add GNSS fixes (run --gnss FILE), or fly higher, so that each "
-            "scan sees ground with relief."
+            f"odometry steps {BLIND_RUN_STEPS} or more in a row (scans {_written(blind)}) could not be registered "
+            "and followed the last motion: a turn begun there went unseen, and the odometry came back too far "
+            "from where it flew for the loop search (featureless ground under the whole strip: water, a field). "
+            "Add GNSS fixes (run --gnss FILE), or fly higher, so that each scan sees ground with relief."
             if blind
             else f"a loop candidate must be older than [loop_closure] sub_map_thresh = {loops.sub_map_thresh} "
             f"submaps (about {needed} accepted scans), or the scans do not match within loop_closure_threshold. "
@@ -360,7 +356,13 @@ def runs_of(indices, chosen, length: int) -> list[tuple[int, int]]:
     ]
 
 
-def _some(indices, shown: int = 6) -> str:
-    """The first ``shown`` runs of ``indices``, as :func:`helpers.sensor.index_ranges` writes them."""
-    runs = index_ranges(np.asarray(indices)).split(", ")
-    return ", ".join(runs) if len(runs) <= shown else ", ".join(runs[:shown]) + ", ..."
+def _some(indices, chosen, shown: int = 6) -> str:
+    """The first ``shown`` runs of consecutive accepted scans (``indices``, the run's) in ``chosen``, as
+    ``first-last`` or one scan: with ``skip_frames`` above 1, scans 3, 6 and 9 are one run, "3-9"."""
+    return _written(runs_of(indices, chosen, 1), shown)
+
+
+def _written(runs, shown: int = 6) -> str:
+    """``runs`` ((first, last) scans) written ``first-last``, or ``first`` alone, the first ``shown`` of them."""
+    words = [f"{first}-{last}" if last != first else f"{first}" for first, last in runs]
+    return ", ".join(words[:shown]) + (", ..." if len(words) > shown else "")

@@ -145,6 +145,15 @@ def test_revisits_after_a_blind_stretch_name_it_not_the_loop_settings():
     assert "sub_map_thresh" in scattered.warning() and "in a row" not in scattered.warning()
 
 
+def test_steps_that_fell_back_are_named_as_runs_of_accepted_scans():
+    """With skip_frames = 3 the accepted scans are 0, 3, 6, ...: fallbacks on seven accepted scans in a row
+    are one run, first-last, not seven scans; two apart with an accepted scan between are two."""
+    in_a_row = assess(_out_and_back(range(10, 17)))  # scans 33, 36, ..., 51
+    apart = assess(_out_and_back([3, 5, *range(30, 36)]))  # scans 12 and 18, then 93-108
+    assert "previous motion (scans 33-51)." in in_a_row.warning(), in_a_row.problems
+    assert "previous motion (scans 12, 18, 93-108)." in apart.warning(), apart.problems
+
+
 def _loop_off_by(metres, sigma_m):
     """A loop edge from node 0 to the last node, ``metres`` off along y, with ``sigma_m`` in its information."""
     true = _at(2.0 * (NODES - 1))
