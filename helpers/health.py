@@ -154,7 +154,62 @@ class Health:
 
 
 def assess(result) -> Health:
-    """The :class:`Health` of a :class:`helpers.pipeline.SlamResult`."""
+    """The :class:`Health` of a :class:`helpers.pipeline.SlamResult`: each rule of the module in turn."""
+    run = _measure(result)
+    problems, drift = [], []  # drift: the indices of the problems the drift rules name (which loops may answer)
+    for rule, reads_drift in RULES:
+        problem = rule(run)
+        if problem:
+            problems.append(problem)
+            if reads_drift:
+                drift.append(len(problems) - 1)
+    config = result.config
+    if drift and result.loops and config.pose_graph.graph_weights == "hessian" and not run.loops_disagree:
+        # The odometry drifted: do the loops hold the trajectory all the same, by the graph's own reckoning? Only
+        # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
+        # the rest, judged against the graph without it (a graph bent to a loop sits close to it), unless the
+        # kernel set it aside.
+        expected, why = graph_answer(result, run.rebuilt, run.without, run.counts)
+        if expected is not None and expected <= MAX_EXPECTED_ATE_M:
+            problems = [problem for k, problem in enumerate(problems) if k not in drift]
+        else:  # the last word of the drift rules says why the graph could not answer them
+            problems[drift[-1]] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
+    return Health(run.counts, problems)
+
+
+@dataclass
+class _Run:
+    """What the rules read of a run, measured once (the names of :func:`_measure`)."""
+
+    result: object
+    steps: int
+    fallbacks: list
+    poor: np.ndarray
+    weak: np.ndarray
+    flown: float
+    revisited: int
+    unclosed: int
+    rebuilt: object
+    without: object
+    held: bool
+    expected: float | None
+    unknown: str
+    correction: float
+    against: list
+    pull: float
+    counts: dict
+
+    @property
+    def drifted(self) -> bool:  # the loops moved the trajectory far: the odometry drifted
+        return self.correction > max(MAX_CORRECTION_SHARE * self.flown, CORRECTION_FLOOR_M)
+
+    @property
+    def loops_disagree(self) -> bool:
+        return bool(self.against) and self.pull > CORRECTION_FLOOR_M
+
+
+def _measure(result) -> _Run:
+    """The run's :class:`_Run`, its counts included."""
     config, odometry = result.config, result.odometry
     fit, loops = config.registration, config.loop_closure
     steps = len(odometry.relative)
@@ -198,109 +253,156 @@ def assess(result) -> Health:
         "weakest_step_sigma_m": round(float(np.nanmax(sigmas)), 3) if np.isfinite(sigmas).any() else None,
         "distance_flown_m": round(flown, 1),
         "expected_ate_m": None if expected is None else round(expected, 3),
-        "loop_correction_sigmas": None,  # measured only when the drift rules name a run its loops may hold (below)
+        "loop_correction_sigmas": None,  # measured only when the drift rules name a run its loops may hold
         "n_loops_off_the_rest": None,  # the same
     }
-    problems, drift = [], []  # drift: the indices of the problems the drift rules name (which loops may answer)
-    if not held and steps and len(fallbacks) > MAX_FALLBACK_SHARE * steps:
-        problems.append(
-            f"{len(fallbacks)} of {steps} odometry steps ({len(fallbacks) / steps:.0%}) could not be registered "
-            f"and fell back to the previous motion (scans {_some(result.indices, fallbacks)}). Likely cause: "
-            "consecutive accepted scans share too little ground (a low flight, a narrow sensor or waypoints far "
-            "apart), or too few points for their descriptors. "
-            + (
-                f"Try [registration] skip_frames = 1 (now {fit.skip_frames})."
-                if fit.skip_frames > 1
-                else f"Try a finer [features] grid_step (now {config.features.grid_step} m), or fly higher."
-            )
+    return _Run(
+        result, steps, fallbacks, poor, weak, flown, revisited, unclosed, rebuilt, without, held, expected, unknown,
+        correction, against, pull, counts,
+    )  # fmt: skip
+
+
+def _fell_back(run: _Run) -> str | None:
+    """Too many steps fell back to the previous motion (a drift rule)."""
+    if run.held or not run.steps or len(run.fallbacks) <= MAX_FALLBACK_SHARE * run.steps:
+        return None
+    config = run.result.config
+    skip = config.registration.skip_frames
+    return (
+        f"{len(run.fallbacks)} of {run.steps} odometry steps ({len(run.fallbacks) / run.steps:.0%}) could not be "
+        f"registered and fell back to the previous motion (scans {_some(run.result.indices, run.fallbacks)}). "
+        "Likely cause: consecutive accepted scans share too little ground (a low flight, a narrow sensor or "
+        "waypoints far apart), or too few points for their descriptors. "
+        + (
+            f"Try [registration] skip_frames = 1 (now {skip})."
+            if skip > 1
+            else f"Try a finer [features] grid_step (now {config.features.grid_step} m), or fly higher."
         )
-        drift.append(len(problems) - 1)
-    if len(poor):
-        problems.append(
-            f"{len(poor)} odometry steps kept an ICP RMSE above {fit.icp_fallback_rmse} m (scans "
-            f"{_some(result.indices, poor)}): the trajectory may break there. Likely cause: too little overlap or "
-            "too few points. Try a smaller [registration] skip_frames or [features] grid_step."
-        )
-    if not held and steps and len(weak) > MAX_FALLBACK_SHARE * steps:
-        problems.append(
-            f"{len(weak)} of {steps} odometry steps ({len(weak) / steps:.0%}) were registered on ground too flat "
-            f"to pin the motion along it (scans {_some(result.indices, weak)}): ICP may slide there, and the "
-            "trajectory drift unseen. Likely cause: flat, featureless ground (fields, parking lots, water) under a "
-            "narrow strip. Fly higher, so that each scan sees more relief."
-        )
-        drift.append(len(problems) - 1)
-    drifted = correction > max(MAX_CORRECTION_SHARE * flown, CORRECTION_FLOOR_M)  # the last rule below
-    loops_disagree = bool(against) and pull > CORRECTION_FLOOR_M
-    if loops_disagree:
-        kernel = config.pose_graph.loop_kernel
-        fate = f"the {kernel} kernel did not set them aside" if kernel != "none" else "no robust kernel"
-        pairs = ", ".join(f"{loop.i}-{loop.j}" for loop in against[:4]) + (", ..." if len(against) > 4 else "")
-        # Where the loops also moved the trajectory far, the rest of the graph is the drifted odometry: a true loop
-        # disagrees with it as much as a false one would, and the run cannot tell them apart.
-        verdict = (
-            "either they are false or the odometry between their ends drifted more than its information says "
-            "(the loops moved the trajectory far, below), and the run cannot tell which"
-            if drifted
-            else "they are most likely false"
-        )
-        problems.append(
-            f"{len(against)} of {len(result.loops)} loop edges (nodes {pairs}) end more than {FALSE_LOOP_SIGMAS:g} "
-            f"sigmas, and farther than a false loop is off, from where the rest of the graph puts them: {verdict}; "
-            f"they move the trajectory by up to {pull:.2f} m ({fate}). "
-            "If false, the likely cause is repetitive or flat ground that matches within the loop thresholds: try "
-            f"a lower [loop_closure] rmse_threshold (now {loops.rmse_threshold} m)."
-        )
-    if not held and revisited >= config.map.n_scans_per_submap and unclosed > revisited / 2:
-        needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
-        blind = runs_of(result.indices, fallbacks, BLIND_RUN_STEPS)
-        cause = (
-            f"odometry steps {BLIND_RUN_STEPS} or more in a row (scans {_written(blind)}) could not be registered "
-            "and followed the last motion: a turn begun there went unseen, and the odometry came back too far "
-            "from where it flew for the loop search (featureless ground under the whole strip: water, a field). "
-            "Add GNSS fixes (run --gnss FILE), or fly higher, so that each scan sees ground with relief."
-            if blind
-            else f"a loop candidate must be older than [loop_closure] sub_map_thresh = {loops.sub_map_thresh} "
-            f"submaps (about {needed} accepted scans), or the scans do not match within loop_closure_threshold. "
-            "Try a smaller sub_map_thresh."
-        )
-        problems.append(
-            f"{revisited} accepted scans come back over ground flown earlier, and {unclosed} of them closed no "
-            f"loop, so the drift stays in the map. Likely cause: {cause}"
-        )
-    if not held and drifted:
-        share = f", {correction / flown:.1%} of the {flown:.0f} m flown" if flown > 0 else " (the flight hovered)"
-        problems.append(
-            f"The loop edges moved the trajectory by up to {correction:.1f} m{share}: the odometry drifted that "
-            "much, and between the places where loops closed the "
-            "trajectory and the map keep part of that drift. Likely cause: odometry steps on weak ground (too flat, "
-            "little overlap). Fly higher, or over the same ground more than once, so that loops close in more places."
-        )
-        drift.append(len(problems) - 1)
-    if held and expected is None:
-        problems.append(
-            f"With {len(result.gnss_factors)} GNSS fixes the graph could not say how far off it expects its "
-            f"trajectory to be ({unknown}). Likely cause: nodes that neither the steps nor the fixes pin "
-            "(a direction no edge holds). Check the GNSS file's scan indices and sigmas."
-        )
-    if held and expected is not None and expected > MAX_EXPECTED_ATE_M:
-        problems.append(
-            f"With {len(result.gnss_factors)} GNSS fixes the graph expects its trajectory to be {expected:.2f} m off "
-            f"(root mean square of its nodes' position sigmas), more than {MAX_EXPECTED_ATE_M} m. Likely cause: "
-            "fixes too loose or too far apart for odometry steps that pinned little between them (flat ground, "
-            "steps that fell back). Give the receiver's true sigma (run --gnss-sigma), or fly where the ground "
-            "has relief."
-        )
-    if drift and result.loops and config.pose_graph.graph_weights == "hessian" and not loops_disagree:
-        # The odometry drifted: do the loops hold the trajectory all the same, by the graph's own reckoning? Only
-        # calibrated information can answer, and only in a graph that agrees with itself: no loop edge against
-        # the rest, judged against the graph without it (a graph bent to a loop sits close to it), unless the
-        # kernel set it aside.
-        expected, why = graph_answer(result, rebuilt, without, counts)
-        if expected is not None and expected <= MAX_EXPECTED_ATE_M:
-            problems = [problem for k, problem in enumerate(problems) if k not in drift]
-        else:  # the last word of the drift rules says why the graph could not answer them
-            problems[drift[-1]] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
-    return Health(counts, problems)
+    )
+
+
+def _kept_poor(run: _Run) -> str | None:
+    """A step kept a poor ICP fit: the chain may break there."""
+    if not len(run.poor):
+        return None
+    return (
+        f"{len(run.poor)} odometry steps kept an ICP RMSE above {run.result.config.registration.icp_fallback_rmse} "
+        f"m (scans {_some(run.result.indices, run.poor)}): the trajectory may break there. Likely cause: too "
+        "little overlap or too few points. Try a smaller [registration] skip_frames or [features] grid_step."
+    )
+
+
+def _on_flat_ground(run: _Run) -> str | None:
+    """Too many steps lay on ground too flat to pin them (a drift rule)."""
+    if run.held or not run.steps or len(run.weak) <= MAX_FALLBACK_SHARE * run.steps:
+        return None
+    return (
+        f"{len(run.weak)} of {run.steps} odometry steps ({len(run.weak) / run.steps:.0%}) were registered on ground "
+        f"too flat to pin the motion along it (scans {_some(run.result.indices, run.weak)}): ICP may slide there, "
+        "and the trajectory drift unseen. Likely cause: flat, featureless ground (fields, parking lots, water) "
+        "under a narrow strip. Fly higher, so that each scan sees more relief."
+    )
+
+
+def _loops_against_the_rest(run: _Run) -> str | None:
+    """Loop edges far from where the rest of the graph puts them, still moving it."""
+    if not run.loops_disagree:
+        return None
+    config, against = run.result.config, run.against
+    kernel = config.pose_graph.loop_kernel
+    fate = f"the {kernel} kernel did not set them aside" if kernel != "none" else "no robust kernel"
+    pairs = ", ".join(f"{loop.i}-{loop.j}" for loop in against[:4]) + (", ..." if len(against) > 4 else "")
+    # Where the loops also moved the trajectory far, the rest of the graph is the drifted odometry: a true loop
+    # disagrees with it as much as a false one would, and the run cannot tell them apart.
+    verdict = (
+        "either they are false or the odometry between their ends drifted more than its information says "
+        "(the loops moved the trajectory far, below), and the run cannot tell which"
+        if run.drifted
+        else "they are most likely false"
+    )
+    return (
+        f"{len(against)} of {len(run.result.loops)} loop edges (nodes {pairs}) end more than {FALSE_LOOP_SIGMAS:g} "
+        f"sigmas, and farther than a false loop is off, from where the rest of the graph puts them: {verdict}; "
+        f"they move the trajectory by up to {run.pull:.2f} m ({fate}). "
+        "If false, the likely cause is repetitive or flat ground that matches within the loop thresholds: try "
+        f"a lower [loop_closure] rmse_threshold (now {config.loop_closure.rmse_threshold} m)."
+    )
+
+
+def _revisits_unclosed(run: _Run) -> str | None:
+    """Most revisits closed no loop: the drift stays in the map."""
+    config = run.result.config
+    if run.held or run.revisited < config.map.n_scans_per_submap or run.unclosed <= run.revisited / 2:
+        return None
+    loops = config.loop_closure
+    needed = (loops.sub_map_thresh + 1) * config.map.n_scans_per_submap
+    blind = runs_of(run.result.indices, run.fallbacks, BLIND_RUN_STEPS)
+    cause = (
+        f"odometry steps {BLIND_RUN_STEPS} or more in a row (scans {_written(blind)}) could not be registered "
+        "and followed the last motion: a turn begun there went unseen, and the odometry came back too far "
+        "from where it flew for the loop search (featureless ground under the whole strip: water, a field). "
+        "Add GNSS fixes (run --gnss FILE), or fly higher, so that each scan sees ground with relief."
+        if blind
+        else f"a loop candidate must be older than [loop_closure] sub_map_thresh = {loops.sub_map_thresh} "
+        f"submaps (about {needed} accepted scans), or the scans do not match within loop_closure_threshold. "
+        "Try a smaller sub_map_thresh."
+    )
+    return (
+        f"{run.revisited} accepted scans come back over ground flown earlier, and {run.unclosed} of them closed no "
+        f"loop, so the drift stays in the map. Likely cause: {cause}"
+    )
+
+
+def _loops_moved_far(run: _Run) -> str | None:
+    """The loops moved the trajectory far: the odometry drifted that much (a drift rule)."""
+    if run.held or not run.drifted:
+        return None
+    flown, correction = run.flown, run.correction
+    share = f", {correction / flown:.1%} of the {flown:.0f} m flown" if flown > 0 else " (the flight hovered)"
+    return (
+        f"The loop edges moved the trajectory by up to {correction:.1f} m{share}: the odometry drifted that "
+        "much, and between the places where loops closed the trajectory and the map keep part of that drift. "
+        "Likely cause: odometry steps on weak ground (too flat, little overlap). Fly higher, or over the same "
+        "ground more than once, so that loops close in more places."
+    )
+
+
+def _fixes_cannot_say(run: _Run) -> str | None:
+    """With GNSS fixes, GTSAM could not give the graph's marginals."""
+    if not run.held or run.expected is not None:
+        return None
+    return (
+        f"With {len(run.result.gnss_factors)} GNSS fixes the graph could not say how far off it expects its "
+        f"trajectory to be ({run.unknown}). Likely cause: nodes that neither the steps nor the fixes pin "
+        "(a direction no edge holds). Check the GNSS file's scan indices and sigmas."
+    )
+
+
+def _fixes_too_loose(run: _Run) -> str | None:
+    """With GNSS fixes, the graph expects its trajectory too far off."""
+    if not run.held or run.expected is None or run.expected <= MAX_EXPECTED_ATE_M:
+        return None
+    return (
+        f"With {len(run.result.gnss_factors)} GNSS fixes the graph expects its trajectory to be {run.expected:.2f} "
+        f"m off (root mean square of its nodes' position sigmas), more than {MAX_EXPECTED_ATE_M} m. Likely cause: "
+        "fixes too loose or too far apart for odometry steps that pinned little between them (flat ground, "
+        "steps that fell back). Give the receiver's true sigma (run --gnss-sigma), or fly where the ground "
+        "has relief."
+    )
+
+
+# The rules in the order their problems are written, each with whether it reads the odometry's drift (the loops
+# may answer those, see the module).
+RULES = (
+    (_fell_back, True),
+    (_kept_poor, False),
+    (_on_flat_ground, True),
+    (_loops_against_the_rest, False),
+    (_revisits_unclosed, False),
+    (_loops_moved_far, True),
+    (_fixes_cannot_say, False),
+    (_fixes_too_loose, False),
+)
 
 
 def graph_answer(result, rebuilt, without, counts: dict) -> tuple[float | None, str]:
