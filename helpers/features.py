@@ -72,8 +72,8 @@ def keypoint_fpfh(points, neighbors: int, share: float) -> tuple[np.ndarray, np.
     ``compute_fpfh_feature``'s descriptors exactly, and it can skip the
     points that are not keypoints. Either is the largest part
     of a scan's preparation; a numpy version sharing one neighbour query
-    between normals, SPFH and FPFH reproduced them but was slower (README,
-    measured figures).
+    between normals, SPFH and FPFH reproduced them but was slower
+    (``benchmarks/README.md``).
     """
     points = check_points(points, "the cloud to describe")
     if neighbors < 3:
@@ -103,8 +103,7 @@ def keypoints(normals, share: float) -> np.ndarray:
     right, in a fraction of the matching time (it compares every moving
     descriptor with every fixed one) and the same odometry after ICP; but
     the robust fit, with fewer inliers, lands a little farther from the
-    truth, so the reference's "every point" stays the default (the README's
-    measured figures).
+    truth, so the reference's "every point" stays the default (``benchmarks/README.md``).
     """
     normals = np.asarray(normals, dtype=np.float64)
     if not 0 < share <= 1:

@@ -52,9 +52,10 @@ GRID_STEPS = (("features", "grid_step"), ("registration", "icp_grid_step"), ("ma
 # reference describes on the same grid as the rest). The matcher compares every moving descriptor with every
 # fixed one, so its time grows with the square of their number, and FPFH's with their number: on the default
 # flight a 3 m grid keeps 2,800 of 5,800 points, and FPFH and matching take 41-42 ms a scan against 115-124 (a
-# default run's stages, paired; README, "Measured figures"). ICP, the map and every distance still follow the
+# default run's stages, paired; benchmarks/README.md). ICP, the map and every distance still follow the
 # footprint's step, and the floor is the surface's cell as for every grid, so low flights, whose grid is
-# already held there, keep it (coarser descriptors lost them: Autzen at 150 m and the sparse tile, README).
+# already held there, keep it (coarser descriptors lost them: Autzen at 150 m and the sparse tile,
+# benchmarks/README.md).
 DESCRIPTOR_GRID_FACTOR = 2.0
 # Where every scan is accepted (skip_frames 1: a flight under half the reference's height at its spacing), the
 # scans' ray rows lie about one ICP cell apart, and scan-to-scan ICP over ground with little relief pulls one
@@ -72,9 +73,9 @@ LOW_FLIGHT_LOCAL_MAP = 6
 # benchmarks/bench_flights.py it left every one nearer the truth (Autzen at 150, 200 and 250 m: 0.88, 0.72, 0.56 m
 # -> 0.83, 0.69, 0.32 m, one false loop fewer at 150 and at 250 m; the sparse tile at 150 and 200 m: 2.44, 4.34 m
 # -> 1.99, 2.14 m; with the speed swinging by 30 %, Autzen at 250 m and the sparse tile at 150 m: 0.91, 6.72 m ->
-# 0.48, 3.88 m; not every low flight: over Autzen at 200 m on the loop `run` fits, 1.18 -> 1.41 m, README). On
-# higher flights, where a few loops close and which ones decides the result, the icp sigmas
-# stayed better (at 700 m over other scenes: seed 11 0.31 -> 0.45 m; README, "Measured, not taken").
+# 0.48, 3.88 m; not every low flight: over Autzen at 200 m on the loop `run` fits, 1.18 -> 1.41 m,
+# benchmarks/README.md). On higher flights, where a few loops close and which ones decides the result, the icp sigmas
+# stayed better (at 700 m over other scenes: seed 11 0.31 -> 0.45 m; benchmarks/README.md, "Measured, not taken").
 # Only with the local map and no edges back, the graph they were measured on: a config that registers scan to
 # scan with edges back, each measuring the ground its steps measured, keeps the fixed sigmas (under the
 # information those edges count that ground several times, and 2 m GNSS fixes then pulled a low stretch only

@@ -27,8 +27,8 @@ def expected_ate(result) -> float:
     each node's position sigma (:meth:`helpers.posegraph.PoseGraph.position_sigmas`), in the graph the run
     optimised (its edges, loops and GNSS fixes, the first node held where the run held it) at the optimised
     poses. It is as honest as the edges' information: with calibrated information and a fix at every scan
-    the ATE was 0.9-1.35 times it on six low flights, four with 2 m fixes and two with 10 m ones (the
-    README's "Your own data")."""
+    the ATE was 0.9-1.35 times it on six low flights, four with 2 m fixes and two with 10 m ones
+    (``benchmarks/README.md``, "The motion factor and GNSS")."""
     graph = _graph_as_run(result)
     sigmas = graph.position_sigmas(
         result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
