@@ -181,23 +181,23 @@ def assess(result) -> Health:
 class _Run:
     """What the rules read of a run, measured once (the names of :func:`_measure`)."""
 
-    result: object
-    steps: int
-    fallbacks: list
-    poor: np.ndarray
-    weak: np.ndarray
-    flown: float
-    revisited: int
-    unclosed: int
-    rebuilt: object
-    without: object
-    held: bool
-    expected: float | None
-    unknown: str
-    correction: float
-    against: list
-    pull: float
-    counts: dict
+    result: object  # the SlamResult
+    steps: int  # odometry steps
+    fallbacks: list  # scan indices of the steps that fell back to the previous motion
+    poor: np.ndarray  # ... of the steps whose ICP RMSE stayed above icp_fallback_rmse
+    weak: np.ndarray  # ... of the steps on ground too flat to pin them
+    flown: float  # m, along the odometry
+    revisited: int  # accepted scans over ground flown before
+    unclosed: int  # of those, the ones that closed no loop
+    rebuilt: object  # the loop measures' start (graph_measures.rebuilt_poses), None without loops
+    without: object  # the graph optimised without its loops, None without loops
+    held: bool  # GNSS fixes in the graph
+    expected: float | None  # m, the ATE a graph held by fixes expects of itself
+    unknown: str  # why GTSAM could not give it
+    correction: float  # m, the farthest the loops moved a pose
+    against: list  # loop edges against the rest of the graph
+    pull: float  # m, how far those move the trajectory
+    counts: dict  # Health.counts
 
     @property
     def drifted(self) -> bool:  # the loops moved the trajectory far: the odometry drifted
