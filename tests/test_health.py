@@ -416,12 +416,12 @@ def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch,
 def test_gnss_fixes_whose_graph_cannot_say_how_sure_it_is_leave_a_run_untrusted(monkeypatch):
     """The run of test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing, trusted with 0.3 m fixes, when
     GTSAM cannot give the graph's marginals: not trusted, and the warning says so."""
-    import helpers.health
+    import helpers.health_rules  # where the run's facts, a GNSS graph's expected ATE among them, are measured
 
     def fails(result):
         raise SlamError("indeterminant linear system")
 
-    monkeypatch.setattr(helpers.health, "expected_ate", fails)
+    monkeypatch.setattr(helpers.health_rules, "expected_ate", fails)
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(0.3)))
     assert not health.trusted and health.counts["expected_ate_m"] is None
     assert "could not say how far off" in health.warning() and "indeterminant linear system" in health.warning()
