@@ -184,6 +184,7 @@ class Slam:
         self.icp = IcpService.from_config(config.registration, pose_graph=config.pose_graph)
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given, self.gnss = odometry, gnss
+        self._fix_rows = {} if gnss is None else {int(index): r for r, index in enumerate(gnss.indices)}
         self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph)
         self.edges_back = EdgesBack.from_config(self.icp, config.pose_graph)
         if background and config.pose_graph.edges_back > 1:
@@ -237,9 +238,11 @@ class Slam:
             edges = self.edges_back.collect()
             self.loops.add_edges(edges)
             self.runtime["edges_back"] += time.perf_counter() - start
-        # 2. Submap and loop query, on the odometry poses.
+        # 2. Submap and loop query, on the odometry poses (the search looks where the GNSS fixes, if any, put them).
         start = time.perf_counter()
-        query = self.loops.add(node, cloud, poses[node], self.clouds, poses, information)
+        row = self._fix_rows.get(int(index))
+        fix = None if row is None else (self.gnss.positions[row], self.gnss.sigmas)
+        query = self.loops.add(node, cloud, poses[node], self.clouds, poses, information, fix)
         self.runtime["submaps_and_loop_closure"] += time.perf_counter() - start
         # 3. Edges back, from the chained odometry.
         start = time.perf_counter()

@@ -45,6 +45,17 @@ once for that anchor, as on a short flight.
 The graph is linearised at the odometry poses (they never change during a
 run). Loop edges enter it as plain Gaussians: a false loop would move the old
 places near it and narrow the gate around the wrong spot.
+
+GNSS fixes (:meth:`RelativeUncertainty.add_fix`) hold the graph in the map
+frame. Where the window holds at least :data:`MIN_FIXES` of them, it is first
+solved with the fixes (Levenberg-Marquardt, from the last such solution),
+and linearised there rather than at the odometry: after a turn the odometry
+missed (a field too flat to see it turn), the flight bends back to where the
+fixes say it flew, and the old places, the gate and ICP's start follow. The
+answers are then expressed in the frame where the anchor lies at its
+odometry pose, as without fixes; the covariance is the anchor-held one, so
+that the fixes near the current node narrow it a little more than the
+covariance of the offset alone would.
 """
 
 from __future__ import annotations
@@ -62,6 +73,8 @@ from .factors import Edge, edge_information, gaussian, pose3
 REFRESH_NODES = 12  # recompute the marginals once the chain since the last computation holds this many nodes
 WINDOW_NODES = 800  # the nodes a computation holds at most: the anchor's neighbourhood along the graph's edges
 ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any edge, still well conditioned
+MIN_FIXES = 3  # GNSS fixes a window must hold before they, not the anchor's odometry pose, place it
+LOOSE_SIGMAS = np.array([1.0, 1.0, 1.0, 1e4, 1e4, 1e4])  # rad, m: a prior that only settles what fixes in a line leave
 
 
 def adjoint(T: np.ndarray) -> np.ndarray:
@@ -109,6 +122,9 @@ class RelativeUncertainty:
         self._exact: set[int] = set()  # the nodes whose cached covariance came from the anchor's marginals
         self._chain = np.zeros((6, 6))  # the current node relative to the anchor, along the odometry steps
         self._due = False  # a loop edge came since the anchor's marginals
+        self._fixes: dict[int, gtsam.GPSFactor] = {}  # node -> its GNSS fix
+        self._held: dict[int, gtsam.Pose3] = {}  # node -> where the last solve with fixes put it (map frame)
+        self._linear = np.zeros((0, 4, 4))  # node -> the pose its cached covariance is about (the anchor's frame)
 
     @property
     def num_nodes(self) -> int:
@@ -158,6 +174,13 @@ class RelativeUncertainty:
                 raise SlamError(f"edge {edge.i}-{edge.j}: node {k} is not in the graph ({self.num_nodes} nodes)")
         self._add(edge, loop=loop)
         self._due |= loop  # a loop shrinks the relative covariances: compute them again at the next query
+
+    def add_fix(self, node: int, position, sigmas) -> None:
+        """A GNSS fix of ``node``: its position (map frame, m) and the fix's x y z sigmas (m)."""
+        if not 0 <= node < self.num_nodes:
+            raise SlamError(f"a GNSS fix of node {node}, which is not in the graph ({self.num_nodes} nodes)")
+        noise = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
+        self._fixes[int(node)] = gtsam.GPSFactor(int(node), np.asarray(position, dtype=float), noise)
 
     def position_covariances(self, nodes, wanted=None) -> np.ndarray:
         """(K, 3, 3) covariance (m², map frame) of where each of ``nodes`` lies
@@ -229,14 +252,19 @@ class RelativeUncertainty:
                 self._exact.add(int(c))
         relative = np.array([self._cached[int(c)] for c in nodes]).reshape(-1, 6, 6)
         relative = relative + self._spread(nodes)
-        rotation = np.array([self.poses[c][:3, :3] for c in nodes]).reshape(-1, 3, 3)
+        rotation = np.array([self._about(c)[:3, :3] for c in nodes]).reshape(-1, 3, 3)
         return rotation @ relative[:, 3:, 3:] @ np.swapaxes(rotation, 1, 2)
 
     def _spread(self, nodes: np.ndarray) -> np.ndarray:
         """(K, 6, 6): the chain since the anchor, moved into each node's frame."""
-        poses = np.array([self.poses[c] for c in nodes]).reshape(-1, 4, 4)
+        poses = np.array([self._about(c) for c in nodes]).reshape(-1, 4, 4)
         spread = adjoint(np.linalg.inv(poses) @ self.poses[-1])
         return spread @ self._chain @ np.swapaxes(spread, 1, 2)
+
+    def _about(self, node) -> np.ndarray:
+        """The pose node ``node``'s cached covariance is about, in the anchor's frame: where the graph was
+        linearised (its odometry pose, or where the fixes put it)."""
+        return self._linear[node] if node < len(self._linear) else self.poses[node]
 
     def _add(self, edge: Edge, *, loop: bool) -> np.ndarray:
         information = edge_information(edge, self.settings, loop=loop)
@@ -275,6 +303,13 @@ class RelativeUncertainty:
                 i, j = self._ends[f]
                 if j == node and inside[i]:  # each edge once, at its later end
                     graph.add(self._factors[f])
+        fixed = [self._fixes[int(node)] for node in window if int(node) in self._fixes]
+        to_anchor = np.eye(4)  # from the frame the graph is solved in to the one where the anchor is at its odometry
+        if len(fixed) >= MIN_FIXES:
+            values = self._held_by(graph, values, window, anchor, fixed)
+            to_anchor = self.poses[anchor] @ np.linalg.inv(values.atPose3(anchor).matrix())
+            for factor in fixed:
+                graph.add(factor)
         noise = gtsam.noiseModel.Isotropic.Sigma(6, ANCHOR_SIGMA)
         graph.add(gtsam.PriorFactorPose3(anchor, values.atPose3(anchor), noise))
         try:
@@ -282,18 +317,54 @@ class RelativeUncertainty:
             moved = values.retract(self._tree.optimize())
         except RuntimeError as exc:  # an indeterminant system: some node joined by no edge
             raise SlamError(f"the loop search's graph cannot be solved: {exc}") from None
-        rows = gtsam.utilities.extractPose3(moved)  # rows [R (9, row by row), t (3)], sorted keys
-        self._solved = np.full((self.num_nodes, 4, 4), np.nan)
-        self._solved[window] = np.eye(4)
-        self._solved[window, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
-        self._solved[window, :3, 3] = rows[:, 9:12]
         kept = np.array([c for c in self._cached if c < anchor], dtype=int)  # outside the window too: still valid
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
+        self._solved = np.full((self.num_nodes, 4, 4), np.nan)
+        self._solved[window] = to_anchor @ _matrices(moved)
+        self._linear = np.array(self.poses)  # the odometry poses, but where the fixes placed the window
+        if len(fixed) >= MIN_FIXES:
+            self._linear[window] = to_anchor @ _matrices(values)
         self._anchor, self._exact, self._chain, self._due = anchor, set(), np.zeros((6, 6)), False
         self._window = inside
         self.refreshes += 1
         self.whole += whole and self.num_nodes > self.window_nodes
+
+
+    def _held_by(self, graph, values, window, anchor: int, fixed) -> gtsam.Values:
+        """The window where its edges and GNSS fixes put it (map frame): solved from the last such solution
+        (nodes it did not hold: chained from the node before by the odometry step)."""
+        guess: dict[int, gtsam.Pose3] = {}
+        start = gtsam.Values()
+        for node in map(int, window):
+            if node in self._held:
+                guess[node] = self._held[node]
+            elif node - 1 in guess or node - 1 in self._held:
+                before = guess.get(node - 1, self._held.get(node - 1))
+                guess[node] = before.compose(self._pose3[node - 1].between(self._pose3[node]))
+            else:
+                guess[node] = values.atPose3(node)
+            start.insert(node, guess[node])
+        held = gtsam.NonlinearFactorGraph(graph)
+        for factor in fixed:
+            held.add(factor)
+        held.add(gtsam.PriorFactorPose3(anchor, start.atPose3(anchor), gtsam.noiseModel.Diagonal.Sigmas(LOOSE_SIGMAS)))
+        try:
+            solved = gtsam.LevenbergMarquardtOptimizer(held, start, gtsam.LevenbergMarquardtParams()).optimize()
+        except RuntimeError as exc:
+            raise SlamError(f"the loop search's graph cannot be solved with its GNSS fixes: {exc}") from None
+        for node in window:
+            self._held[int(node)] = solved.atPose3(int(node))
+        return solved
+
+
+def _matrices(values: gtsam.Values) -> np.ndarray:
+    """(K, 4, 4) the poses of ``values``, sorted by key."""
+    rows = gtsam.utilities.extractPose3(values)  # rows [R (9, row by row), t (3)], sorted keys
+    out = np.tile(np.eye(4), (len(rows), 1, 1))
+    out[:, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
+    out[:, :3, 3] = rows[:, 9:12]
+    return out
 
 
 def _rotation_first(information: np.ndarray) -> np.ndarray:

@@ -425,3 +425,65 @@ def test_after_a_loop_icp_starts_where_the_graph_puts_the_scan():
     # the first loop edges move the old places part of the way (weighed against the chain of steps); the more
     # loops, the nearer the truth
     assert len(later) > 10 and max(later) < 0.5 and np.median(later) < 0.05
+
+
+def square_flight(missed_deg: float):
+    """A 60-node square flown counter-clockwise back over its start, 6 m a step: the true poses, and an
+    odometry whose first turn misses ``missed_deg`` degrees at one step (a turn begun over a field too flat
+    to see it) and is right everywhere else."""
+    true_steps, odometry_steps = [], []
+    for k in range(60):
+        turning = k % 15 in (10, 11, 12)  # three steps of 30 degrees: a corner
+        true_steps.append(step(6.0, yaw_deg=30.0 if turning else 0.0))
+        missed = missed_deg if k == 11 else 0.0
+        odometry_steps.append(step(6.0, yaw_deg=(30.0 if turning else 0.0) - missed))
+    truth, odometry = [np.eye(4)], [np.eye(4)]
+    for t, o in zip(true_steps, odometry_steps, strict=True):
+        truth.append(truth[-1] @ t)
+        odometry.append(odometry[-1] @ o)
+    return np.array(truth), np.array(odometry)
+
+
+def test_gnss_fixes_place_the_old_nodes_where_the_flight_was_after_a_missed_turn():
+    # The odometry missed 20 degrees of its first turn: back over the start it puts node 0 some 25 m from where
+    # it is. Fixes (1 m sigma, seeded noise) at every node bend the chain back: held at the current node's
+    # odometry pose, node 0 lies where the truth puts it seen from the current node, within a few metres, and
+    # its covariance is a few square metres, not the chain's; without the fixes the answer is the odometry's.
+    truth, odometry = square_flight(missed_deg=20.0)
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    fixes = truth[:, :3, 3] + np.random.default_rng(1).normal(0.0, 1.0, (len(truth), 3))
+    with_fixes, without = RelativeUncertainty(settings), RelativeUncertainty(settings)
+    for node, pose in enumerate(odometry):
+        for graph in (with_fixes, without):
+            graph.add_node(pose)
+        with_fixes.add_fix(node, fixes[node], np.ones(3))
+    current = len(odometry) - 1
+    seen = odometry[current] @ np.linalg.inv(truth[current]) @ truth[0]  # node 0 where it is, from the current node
+    odometry_error = np.linalg.norm(odometry[0, :3, 3] - seen[:3, 3])
+    assert odometry_error > 20.0
+    cov_with, cov_without = with_fixes.position_covariances([0])[0], without.position_covariances([0])[0]
+    assert np.linalg.norm(with_fixes.positions([0])[0] - seen[:3, 3]) < 3.0
+    np.testing.assert_allclose(without.positions([0])[0], odometry[0, :3, 3], atol=1e-6)
+    assert np.trace(cov_with) < 10.0 < np.trace(cov_without)
+    # ICP against node 0 starts from the scan's pose where the fixes put it: most of the missed turn is
+    # restored (the edges' 0.3 degree sigmas spread the rest of it along the chain)
+
+    def turned(pose):
+        return np.degrees(np.linalg.norm(Rotation.from_matrix(pose[:3, :3].T @ seen[:3, :3]).as_rotvec()))
+
+    assert turned(odometry[0]) == pytest.approx(20.0, abs=0.01)
+    assert turned(with_fixes.solved_poses([0])[0]) < 5.0
+
+
+def test_too_few_fixes_leave_the_graph_held_at_the_anchor():
+    truth, odometry = square_flight(missed_deg=20.0)
+    settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
+    graph = RelativeUncertainty(settings)
+    for node, pose in enumerate(odometry):
+        graph.add_node(pose)
+    for node in (0, 30):  # two fixes: fewer than MIN_FIXES
+        graph.add_fix(node, truth[node, :3, 3], np.ones(3))
+    graph.position_covariances([0])
+    np.testing.assert_allclose(graph.positions([0])[0], odometry[0, :3, 3], atol=1e-6)
+    with pytest.raises(SlamError, match="not in the graph"):
+        graph.add_fix(len(odometry), truth[0, :3, 3], np.ones(3))
