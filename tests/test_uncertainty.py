@@ -479,7 +479,7 @@ def test_too_few_fixes_leave_the_graph_held_at_the_anchor():
     truth, odometry = square_flight(missed_deg=20.0)
     settings = PoseGraphConfig(edge_sigma_m=SIGMA_M, edge_sigma_deg=0.3)
     graph = RelativeUncertainty(settings)
-    for node, pose in enumerate(odometry):
+    for pose in odometry:
         graph.add_node(pose)
     for node in (0, 30):  # two fixes: fewer than MIN_FIXES
         graph.add_fix(node, truth[node, :3, 3], np.ones(3))
