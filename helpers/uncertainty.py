@@ -330,7 +330,6 @@ class RelativeUncertainty:
         self.refreshes += 1
         self.whole += whole and self.num_nodes > self.window_nodes
 
-
     def _held_by(self, graph, values, window, anchor: int, fixed) -> gtsam.Values:
         """The window where its edges and GNSS fixes put it (map frame): solved from the last such solution
         (nodes it did not hold: chained from the node before by the odometry step)."""
