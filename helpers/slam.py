@@ -164,7 +164,8 @@ class Slam:
     (identity when None). ``odometry``: an odometry already computed for
     these scans with this configuration; the run then reuses its poses and
     registers nothing scan to scan (a back end for tests and notebooks).
-    ``gnss``: position fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph.
+    ``gnss``: position fixes (:class:`helpers.gnss.GnssFixes`) added to the pose graph, and to the
+    loop search's graph as the scans arrive (it then searches where the fixes put the flight).
     ``background``: register the edges back in a helper process, one node behind
     (:mod:`helpers.edges_worker`: the same edges, sooner); a :class:`Step` then
     carries the edges back of the node before it.

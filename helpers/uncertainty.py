@@ -97,6 +97,7 @@ class RelativeUncertainty:
         graph = RelativeUncertainty(config.pose_graph)
         graph.add_node(pose)  # each accepted scan, in order (odometry step from the previous one)
         graph.add_edge(edge)  # an edge back; graph.add_edge(loop, loop=True) for a loop edge
+        graph.add_fix(node, position, sigmas)  # a GNSS fix of a node, if the flight has them
         cov = graph.position_covariances(old_nodes)  # (K, 3, 3), map frame, m²
         where = graph.positions(old_nodes)  # (K, 3), map frame, beside the current node's odometry position
 
