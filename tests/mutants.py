@@ -86,6 +86,12 @@ MUTANTS = {
         "    elif gnss:\n",
         "    elif False:\n",
     ),
+    "the loop search ignores the GNSS fixes": (
+        "tests/test_uncertainty.py",
+        "helpers/loopclosure.py",
+        "            self.add_fix(node, *fix)\n",
+        "            pass\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",

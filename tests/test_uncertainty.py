@@ -250,6 +250,38 @@ def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
         assert loop.error_m < 1.0 and loop.error_deg < 2.0
 
 
+def test_with_gnss_the_loop_search_finds_the_revisit_a_missed_turn_hid(short_loop):
+    # The short flight's own odometry with 45 degrees of one early turn taken out (a turn over a featureless
+    # field): it comes back to its start some 40 m off, and the search held at the odometry closes nothing.
+    # With a 1 m fix at every scan the run hands the fixes to its loop search (Slam -> LoopCloser ->
+    # RelativeUncertainty.add_fix), which then looks where they put the flight and closes true loops.
+    import dataclasses
+
+    from helpers.config import Config
+    from helpers.evaluation import grade_loops, run_metrics
+    from helpers.gnss import GnssFixes, simulate_gnss
+    from helpers.pipeline import run_slam
+
+    config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty", "skip_after_loop": 0})
+    odometry = run_slam(short_loop, config).odometry
+    relative = odometry.relative.copy()
+    relative[8] = relative[8] @ np.linalg.inv(step(0.0, yaw_deg=45.0))
+    poses = [odometry.poses[0]]
+    for motion in relative:
+        poses.append(poses[-1] @ motion)
+    bent = dataclasses.replace(odometry, poses=np.array(poses), relative=relative)
+    sigma = 1.0
+    fixes = simulate_gnss(short_loop.poses[:, :3, 3], sigma, sigma, seed=0)
+    gnss = GnssFixes(np.arange(len(short_loop)), fixes, np.full(3, sigma))
+    alone, held = run_slam(short_loop, config, odometry=bent), run_slam(short_loop, config, odometry=bent, gnss=gnss)
+    assert run_metrics(short_loop, alone)["n_loop_closures"] == 0
+    m = run_metrics(short_loop, held)
+    assert m["ate_rmse_odometry_m"] > 20.0
+    assert m["n_loop_closures"] >= 2 and m["n_false_loop_closures"] == 0
+    for loop in grade_loops(short_loop, held):
+        assert loop.error_m < 1.0 and loop.error_deg < 2.0
+
+
 def laps_graph(settings, n_laps=3, per_lap=60, window_nodes=None):
     """A 60-node circle flown ``n_laps`` times, edges back over 2 nodes and a loop edge every 4th node of
     every lap after the first to the same place one lap before; the graph holding it and the poses."""
