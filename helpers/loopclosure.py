@@ -124,11 +124,12 @@ class LoopCloser:
         ``sub_map_thresh`` submaps, query the old ones for a loop (a
         :class:`LoopQuery`, or None). ``information``: that of the odometry
         step to ``node``, for the uncertainty graph (None: the fixed sigmas);
-        ``fix``: the node's GNSS fix, (position, x y z sigmas), for it too."""
+        ``fix``: the node's GNSS fix, (position, x y z sigmas), for it too: the search then looks where
+        the fixes put the flight (:meth:`helpers.uncertainty.RelativeUncertainty.add_fix`)."""
         self.submaps.add_scan(cloud, pose)
         self._follow(node, poses, information)
-        if fix is not None:
-            self.add_fix(node, *fix)
+        if fix is not None and self.uncertainty is not None:
+            self.uncertainty.add_fix(node, *fix)
         if len(self.submaps) <= self.settings.sub_map_thresh:
             return None
         query = self.query(node, cloud, pose, clouds, poses)
@@ -148,12 +149,6 @@ class LoopCloser:
                 if k == node and k > 0 and information is not None:
                     step = Edge(k - 1, k, np.linalg.inv(poses[k - 1]) @ poses[k], information=information)
                 self.uncertainty.add_node(poses[k], step)
-
-    def add_fix(self, node: int, position, sigmas) -> None:
-        """A GNSS fix of node ``node`` (added already) for the uncertainty graph: the loop search then looks
-        where the fixes put the flight (:meth:`helpers.uncertainty.RelativeUncertainty.add_fix`)."""
-        if self.uncertainty is not None:
-            self.uncertainty.add_fix(node, position, sigmas)
 
     def add_edges(self, edges) -> None:
         """Edges the run measured besides the odometry steps and the loops (its edges back), for the uncertainty."""

@@ -125,7 +125,7 @@ class RelativeUncertainty:
         self._due = False  # a loop edge came since the anchor's marginals
         self._fixes: dict[int, gtsam.GPSFactor] = {}  # node -> its GNSS fix
         self._held: dict[int, gtsam.Pose3] = {}  # node -> where the last solve with fixes put it (map frame)
-        self._linear = np.zeros((0, 4, 4))  # node -> the pose its cached covariance is about (the anchor's frame)
+        self._linear = np.zeros((0, 4, 4))  # node -> where the fixes placed it, if they did (see _about)
 
     @property
     def num_nodes(self) -> int:
@@ -264,7 +264,7 @@ class RelativeUncertainty:
 
     def _about(self, node) -> np.ndarray:
         """The pose node ``node``'s cached covariance is about, in the anchor's frame: where the graph was
-        linearised (its odometry pose, or where the fixes put it)."""
+        linearised (where the fixes put it, or its odometry pose: nodes added since, or no fixes)."""
         return self._linear[node] if node < len(self._linear) else self.poses[node]
 
     def _add(self, edge: Edge, *, loop: bool) -> np.ndarray:
@@ -305,8 +305,9 @@ class RelativeUncertainty:
                 if j == node and inside[i]:  # each edge once, at its later end
                     graph.add(self._factors[f])
         fixed = [self._fixes[int(node)] for node in window if int(node) in self._fixes]
+        held = len(fixed) >= MIN_FIXES  # the fixes, not the anchor's odometry pose, place the window
         to_anchor = np.eye(4)  # from the frame the graph is solved in to the one where the anchor is at its odometry
-        if len(fixed) >= MIN_FIXES:
+        if held:
             values = self._held_by(graph, values, window, anchor, fixed)
             to_anchor = self.poses[anchor] @ np.linalg.inv(values.atPose3(anchor).matrix())
             for factor in fixed:
@@ -323,8 +324,9 @@ class RelativeUncertainty:
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
         self._solved = np.full((self.num_nodes, 4, 4), np.nan)
         self._solved[window] = to_anchor @ _matrices(moved)
-        self._linear = np.array(self.poses)  # the odometry poses, but where the fixes placed the window
-        if len(fixed) >= MIN_FIXES:
+        self._linear = np.zeros((0, 4, 4))  # no fixes: linearised at the odometry poses (see _about)
+        if held:
+            self._linear = np.array(self.poses)
             self._linear[window] = to_anchor @ _matrices(values)
         self._anchor, self._exact, self._chain, self._due = anchor, set(), np.zeros((6, 6)), False
         self._window = inside

@@ -89,7 +89,7 @@ MUTANTS = {
     "the loop search ignores the GNSS fixes": (
         "tests/test_uncertainty.py",
         "helpers/loopclosure.py",
-        "            self.add_fix(node, *fix)\n",
+        "            self.uncertainty.add_fix(node, *fix)\n",
         "            pass\n",
     ),
     "ICP returns its initial guess": (
