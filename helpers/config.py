@@ -241,6 +241,11 @@ class LoopClosureConfig(BoundedTable):
         0.005,
         "a loop edge must pin the motion: ICP's weakest over strongest direction at least this (0: the reference)",
     )
+    place_recognition: bool = param(
+        True,
+        "after steps that fell back in a row, also look for the scan's place by its descriptors, wherever the "
+        "odometry puts it (helpers.places; false: the reference)",
+    )
 
     def __post_init__(self):
         self._between("loop_closure_search_radius", 0.0, MAX_RADIUS, "zero (no loops) or a positive number of metres")
@@ -305,6 +310,7 @@ REFERENCE_WORKFLOW = {
         "skip_after_loop": 0,
         "skip_after_closed_place": 0,
         "best_scan_stop": 0.0,
+        "place_recognition": False,
     },
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},
 }

@@ -105,8 +105,9 @@ class LoopCloser:
         map_settings: MapConfig,
         icp: IcpFn,
         graph_settings: PoseGraphConfig | None = None,
+        places=None,
     ) -> None:
-        self.settings, self.icp = settings, icp
+        self.settings, self.icp, self.places = settings, icp, places
         self.submaps = SubmapIndex(map_settings.n_scans_per_submap, map_settings.align_grid_step)
         self.queries: list[LoopQuery] = []
         searched = settings.search == "uncertainty"
@@ -194,21 +195,19 @@ class LoopCloser:
         )
         if candidates.closed:
             self.skipped += 1
+        # 2. The best scan-to-scan match of the matching submaps becomes the loop edge, if accepted.
+        closure, best, pinned = self._best_scan(node, cloud, candidates, clouds, poses)
+        if closure is not None and self.places is not None:
+            self.places.closed()
+        elif self.places is not None and self.places.lost and not candidates.closed:
+            # 3. After a blind stretch the odometry may be far off: the places the scan's descriptors recognise.
+            recognised = self._recognised(node, cloud, pose, clouds, poses)
+            if recognised is not None:
+                candidates, (closure, best, pinned) = recognised
         if not len(candidates.tried_ids):
             return None
-        # 2. The best scan-to-scan match of the matching submaps becomes the loop edge, if accepted.
-        closure, best, pinned = None, float("inf"), float("nan")
-        if len(candidates.ids):
-            n = submaps.n_scans_per_submap
-            match = best_scan_registration(cloud, node, candidates, clouds, poses, n, self.icp, settings)
-            best = match.surface_rmse
-            if match.surface_rmse < settings.rmse_threshold:
-                pinned = self.icp.constraint(moving=cloud, fixed=clouds[match.i], T_fixed_moving=match.relative)
-            if self.accepts(match.surface_rmse, pinned):
-                log.info("loop edge %d -> %d, surface RMSE %.3f m", match.i, match.j, match.surface_rmse)
-                closure = match
-            elif match.surface_rmse < settings.rmse_threshold:
-                log.info("loop %d -> %d left out: ground too flat (constraint %.4f)", match.i, match.j, pinned)
+        if closure is not None:
+            log.info("loop edge %d -> %d, surface RMSE %.3f m", closure.i, closure.j, closure.surface_rmse)
         return LoopQuery(
             node=node,
             n_submaps=len(submaps),
@@ -222,6 +221,56 @@ class LoopCloser:
             closure=closure,
             best_scan_constraint=pinned,
         )
+
+    def _best_scan(self, node: int, cloud: np.ndarray, candidates: LoopCandidates, clouds, poses):
+        """(loop edge or None, its RMSE, its constraint) of the best scan of the matching ``candidates``."""
+        settings = self.settings
+        if not len(candidates.ids):
+            return None, float("inf"), float("nan")
+        n = self.submaps.n_scans_per_submap
+        match = best_scan_registration(cloud, node, candidates, clouds, poses, n, self.icp, settings)
+        pinned = float("nan")
+        if match.surface_rmse < settings.rmse_threshold:
+            pinned = self.icp.constraint(moving=cloud, fixed=clouds[match.i], T_fixed_moving=match.relative)
+        if self.accepts(match.surface_rmse, pinned):
+            return match, match.surface_rmse, pinned
+        if match.surface_rmse < settings.rmse_threshold:
+            log.info("loop %d -> %d left out: ground too flat (constraint %.4f)", match.i, match.j, pinned)
+        return None, match.surface_rmse, pinned
+
+    def _recognised(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses):
+        """(candidates, best scan) of the submaps the scan's descriptors recognise (:mod:`helpers.places`),
+        checked by ICP from the recognised pose as any candidate; the loop edge only if the recognition
+        before agreed. None if nothing was recognised."""
+        settings, count = self.settings, eligible_submaps(len(self.submaps), self.settings)
+        ids, starts = self.places.recognise(node, poses, count)
+        if not len(ids):
+            return None
+        found, tried = [], []
+        for submap_id, start in zip(ids, starts, strict=True):
+            T, rmse = self.icp(
+                moving=cloud, fixed=self.submaps.points[submap_id], T_fixed_moving=start,
+                max_iterations=settings.icp_max_iterations,
+            )  # fmt: skip
+            tried.append(float(rmse))
+            if rmse < settings.loop_closure_threshold:
+                found.append((float(rmse), int(submap_id), check_pose(T, "the ICP result")))
+        found.sort(key=lambda item: item[0])
+        found = found[: settings.max_returned]
+        candidates = LoopCandidates(
+            np.array([f[1] for f in found], dtype=int),
+            np.array([f[0] for f in found], dtype=float),
+            np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
+            n_eligible=count,
+            radius=np.full(len(self.submaps), np.inf),
+            tried_ids=ids,
+            tried=np.array(tried, dtype=float),
+        )
+        closure, best, pinned = self._best_scan(node, cloud, candidates, clouds, poses)
+        if closure is not None and not self.places.confirmed(node, pose, poses[closure.i] @ closure.relative):
+            log.info("loop %d -> %d recognised; it waits for the next recognition to agree", closure.i, closure.j)
+            closure = None
+        return candidates, (closure, best, pinned)
 
     def _uncertain_centres(self, pose: np.ndarray, poses):
         """For the gate, from the scan at ``pose`` (its odometry pose): each eligible submap's

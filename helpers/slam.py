@@ -35,6 +35,7 @@ from .geometry import check_points, check_pose
 from .icp_service import IcpService
 from .loopclosure import LoopCloser, LoopQuery
 from .odometry import Odometry, OdometryResult
+from .places import PlaceRecognition
 from .posegraph import OptimizationResult, PoseGraph
 from .preparation import prepare_scan
 from .submaps import SubmapIndex, build_submap
@@ -186,10 +187,12 @@ class Slam:
         self.odometry = Odometry(config, self.anchor, self.icp)
         self.given, self.gnss = odometry, gnss
         self._fix_rows = {} if gnss is None else {int(index): r for r, index in enumerate(gnss.indices)}
-        self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph)
+        self.places = PlaceRecognition(config) if config.loop_closure.place_recognition else None
+        self.loops = LoopCloser(config.loop_closure, config.map, self.icp, config.pose_graph, self.places)
         self.edges_back = EdgesBack.from_config(self.icp, config.pose_graph)
         if background and config.pose_graph.edges_back > 1:
             self.edges_back = BackgroundEdges(self.edges_back, config)
+        self._given_fallbacks = set() if odometry is None else {int(i) for i, _ in odometry.fallbacks}
         self.clouds: list[np.ndarray] = []
         self.indices: list[int] = []
         self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)
@@ -233,6 +236,10 @@ class Slam:
         self.clouds.append(cloud)
         self.indices.append(int(index))
         self.runtime["odometry"] += time.perf_counter() - start
+        if self.places is not None:  # the frame for place recognition (a given odometry's made only if asked)
+            given = self.given is not None
+            fell_back = index in self._given_fallbacks if given else fallback is not None
+            self.places.follow(node, (lambda: prepare_scan(scan, index, config)) if given else frame, fell_back)
         background = isinstance(self.edges_back, BackgroundEdges)
         if background:  # the node before's edges back, computed meanwhile, join the graph where step 3 adds them
             start = time.perf_counter()

@@ -92,6 +92,12 @@ MUTANTS = {
         "            self.uncertainty.add_fix(node, *fix)\n",
         "            pass\n",
     ),
+    "the loop search never recognises a place": (
+        "tests/test_places.py",
+        "helpers/loopclosure.py",
+        "        elif self.places is not None and self.places.lost and not candidates.closed:\n",
+        "        elif False:\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",
