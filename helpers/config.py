@@ -263,6 +263,7 @@ class LoopClosureConfig(BoundedTable):
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
         self._check("best_scan_stop", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
+        self._check("place_recognition", lambda v: isinstance(v, bool), "true or false")
         self._check("min_constraint", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
 
 

@@ -8,7 +8,9 @@ reaches (``[loop_closure] search``: ``"growth"``, :func:`search_radius` from
 :func:`helpers.uncertainty.mahalanobis_gate`), which places were closed just
 before (``skip_after_loop``), the check of the candidates
 (:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`)
-and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). Figures,
+and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). After a
+blind stretch it also asks :mod:`helpers.places` which old places the
+scan's descriptors recognise, wherever the odometry puts the flight. Figures,
 the health report and the exercises call these rules; none re-derives one.
 
 Frames and conventions are those of :mod:`helpers.factors`: a scan is an
@@ -43,6 +45,7 @@ from .loopsearch import (
     find_loop_candidates,
     radius_after,
     search_radius,
+    verified,
 )
 from .submaps import SubmapIndex, centre_scan_id, scan_ids_of
 from .uncertainty import RelativeUncertainty, mahalanobis_gate
@@ -96,7 +99,9 @@ class LoopCloser:
     ``search = "uncertainty"`` it keeps the run's graph
     (:class:`helpers.uncertainty.RelativeUncertainty`, the edges' noise from
     ``graph_settings``): the odometry steps from ``poses``, its own loop
-    edges, and the edges back the run hands to :meth:`add_edges`.
+    edges, and the edges back the run hands to :meth:`add_edges`. ``places``: the run's
+    :class:`helpers.places.PlaceRecognition` (None: no place is recognised), which the run tells of each
+    scan and of the steps that fell back.
     """
 
     def __init__(
@@ -246,25 +251,9 @@ class LoopCloser:
         ids, starts = self.places.recognise(node, poses, count)
         if not len(ids):
             return None
-        found, tried = [], []
-        for submap_id, start in zip(ids, starts, strict=True):
-            T, rmse = self.icp(
-                moving=cloud, fixed=self.submaps.points[submap_id], T_fixed_moving=start,
-                max_iterations=settings.icp_max_iterations,
-            )  # fmt: skip
-            tried.append(float(rmse))
-            if rmse < settings.loop_closure_threshold:
-                found.append((float(rmse), int(submap_id), check_pose(T, "the ICP result")))
-        found.sort(key=lambda item: item[0])
-        found = found[: settings.max_returned]
-        candidates = LoopCandidates(
-            np.array([f[1] for f in found], dtype=int),
-            np.array([f[0] for f in found], dtype=float),
-            np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
-            n_eligible=count,
-            radius=np.full(len(self.submaps), np.inf),
-            tried_ids=ids,
-            tried=np.array(tried, dtype=float),
+        radius = np.full(len(self.submaps), np.inf)  # no search radius: wherever the descriptors say
+        candidates = verified(
+            self.submaps.points, cloud, ids, starts, self.icp, settings, n_eligible=count, radius=radius
         )
         closure, best, pinned = self._best_scan(node, cloud, candidates, clouds, poses)
         if closure is not None and not self.places.confirmed(node, pose, poses[closure.i] @ closure.relative):

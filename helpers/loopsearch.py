@@ -211,31 +211,36 @@ def find_loop_candidates(
     if len(near) and int(near[0]) in closed:
         return LoopCandidates(*_NONE, n_eligible=len(eligible), radius=radius, closed=True)
 
-    # 3. verify the nearest few by ICP
+    # 3.-4. verify the nearest few by ICP, best first
+    tried = near[:max_attempts].astype(int)
+    starts = [scan_pose if starts is None else starts[k] for k in tried]
+    return verified(submaps, scan_points, tried, starts, icp_fn, settings, n_eligible=len(eligible), radius=radius)
+
+
+def verified(submaps, scan_points, ids, starts, icp_fn: IcpFn, settings: LoopClosureConfig, **searched):
+    """The :class:`LoopCandidates` of registering the scan onto submaps ``ids`` by ICP, onto submap
+    ``ids[k]`` from ``starts[k]`` (the scan's pose in its frame): those with RMSE below
+    ``loop_closure_threshold``, at most ``max_returned``, lowest RMSE first. ``searched``: the
+    ``n_eligible`` and ``radius`` of the search that chose them."""
     found, tried = [], []
-    for submap_id in near[:max_attempts]:
+    for submap_id, start in zip(ids, starts, strict=True):
         pose, rmse = icp_fn(
-            moving=scan_points,
-            fixed=submaps[submap_id],
-            T_fixed_moving=scan_pose if starts is None else starts[submap_id],
+            moving=scan_points, fixed=submaps[submap_id], T_fixed_moving=start,
             max_iterations=settings.icp_max_iterations,
-        )
-        log.debug("submap %d at %.1f m: surface RMSE %.3f m", submap_id, distance[submap_id], rmse)
+        )  # fmt: skip
+        log.debug("submap %d: surface RMSE %.3f m", submap_id, rmse)
         tried.append(rmse)
         if rmse < settings.loop_closure_threshold:
             found.append((float(rmse), int(submap_id), check_pose(pose, "the ICP result")))
-
-    # 4. best first
     found.sort(key=lambda item: item[0])
     found = found[: settings.max_returned]
     return LoopCandidates(
         np.array([f[1] for f in found], dtype=int),
         np.array([f[0] for f in found], dtype=float),
         np.array([f[2] for f in found], dtype=float).reshape(-1, 4, 4),
-        n_eligible=len(eligible),
-        radius=radius,
-        tried_ids=near[:max_attempts].astype(int),
+        tried_ids=np.asarray(ids, dtype=int),
         tried=np.array(tried, dtype=float),
+        **searched,
     )
 
 

@@ -85,9 +85,10 @@ class PlaceRecognition:
             log.info("node %d: %d steps in a row fell back; the loop search recognises places", node, self.blind)
             self.lost = True
         self._current, self._made = frame, None
-        if node == centre_scan_id(node // self.n, self.n):
-            frame = self.current()
-            self.places[node // self.n] = (frame.points, frame.described(), frame.features)
+        if node == centre_scan_id(node // self.n, self.n):  # its descriptors, if made; else made when first asked
+            frame = frame if isinstance(frame, Frame) else self.current()
+            described = None if frame.features is None else frame.described()
+            self.places[node // self.n] = (frame.points, described, frame.features)
 
     def current(self) -> Frame:
         """The frame of the scan followed last, described."""
@@ -105,7 +106,7 @@ class PlaceRecognition:
         ids = [k for k in range(eligible) if k in self.places]
         if not ids:
             return []
-        stored = [_strided(self.places[k][2], MAX_STORED_DESCRIPTORS) for k in ids]
+        stored = [_strided(self._place(k)[2], MAX_STORED_DESCRIPTORS) for k in ids]
         owner = np.repeat(np.asarray(ids), [len(f) for f in stored])
         query = _strided(_described(frame, self.config).features, MAX_QUERY_DESCRIPTORS)
         if len(owner) < 2 or not len(query):
@@ -127,7 +128,7 @@ class PlaceRecognition:
         self.asked, current, features = node, self.current(), self.config.features
         ids, starts = [], []
         for submap_id, votes in self.vote(current, eligible):
-            points, described, descriptors = self.places[submap_id]
+            points, described, descriptors = self._place(submap_id)
             matches = match_features(current.features, descriptors, features.match_threshold, features.match_ratio)
             on_current, on_centre = current.described()[matches[:, 0]], described[matches[:, 1]]
             try:
@@ -139,6 +140,14 @@ class PlaceRecognition:
             ids.append(submap_id)
             starts.append(np.asarray(poses[centre_scan_id(submap_id, self.n)], dtype=float) @ T)
         return np.asarray(ids, dtype=int), np.asarray(starts, dtype=float).reshape(-1, 4, 4)
+
+    def _place(self, submap_id: int) -> tuple:
+        """Submap ``submap_id``'s centre scan as (points, described, descriptors), described once."""
+        points, _, descriptors = self.places[submap_id]
+        if descriptors is None:  # a tracking run described it only if the odometry needed it
+            frame = describe(Frame(points, None, points[:0], {}), self.config)
+            self.places[submap_id] = points, frame.described(), frame.features
+        return self.places[submap_id]
 
     def confirmed(self, node: int, pose: np.ndarray, start: np.ndarray) -> bool:
         """Whether the recognition that puts the scan at ``start`` (its odometry ``pose``) agrees with the

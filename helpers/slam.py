@@ -236,18 +236,19 @@ class Slam:
         self.clouds.append(cloud)
         self.indices.append(int(index))
         self.runtime["odometry"] += time.perf_counter() - start
-        if self.places is not None:  # the frame for place recognition (a given odometry's made only if asked)
-            given = self.given is not None
-            fell_back = index in self._given_fallbacks if given else fallback is not None
-            self.places.follow(node, (lambda: prepare_scan(scan, index, config)) if given else frame, fell_back)
         background = isinstance(self.edges_back, BackgroundEdges)
         if background:  # the node before's edges back, computed meanwhile, join the graph where step 3 adds them
             start = time.perf_counter()
             edges = self.edges_back.collect()
             self.loops.add_edges(edges)
             self.runtime["edges_back"] += time.perf_counter() - start
-        # 2. Submap and loop query, on the odometry poses (the search looks where the GNSS fixes, if any, put them).
+        # 2. Submap and loop query, on the odometry poses (the search looks where the GNSS fixes, if any, put them;
+        # after a blind stretch it also recognises places by their descriptors).
         start = time.perf_counter()
+        if self.places is not None:  # the scan for place recognition (with a given odometry, made only if asked)
+            given = self.given is not None
+            fell_back = index in self._given_fallbacks if given else fallback is not None
+            self.places.follow(node, (lambda: prepare_scan(scan, index, config)) if given else frame, fell_back)
         row = self._fix_rows.get(int(index))
         fix = None if row is None else (self.gnss.positions[row], self.gnss.sigmas)
         query = self.loops.add(node, cloud, poses[node], self.clouds, poses, information, fix)
