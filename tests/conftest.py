@@ -18,6 +18,7 @@ import pytest
 
 import helpers
 from helpers.config import NOISE_SEED_VARIABLE, SensorConfig, noise_seed_from_environment
+from helpers.waypoints import loop_waypoints
 
 AUTZEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "autzen_trim.laz"  # the real tile beside the repo
 
@@ -31,6 +32,20 @@ def pytest_report_header(config):
 def default_dataset():
     """The embedded scene flown along the shipped loop (689 scans, ~4 s)."""
     return helpers.create_dataset()
+
+
+@pytest.fixture(scope="module")
+def short_loop_csv(tmp_path_factory):
+    """The waypoints of a 200 m loop over the embedded scene, flown once and 30 m past its start (115 scans)."""
+    path = tmp_path_factory.mktemp("loop") / "loop.csv"
+    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
+    return path
+
+
+@pytest.fixture(scope="module")
+def short_loop(short_loop_csv):
+    """That loop flown: its dataset."""
+    return helpers.create_dataset(waypoints_path=short_loop_csv)
 
 
 @pytest.fixture()

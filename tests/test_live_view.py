@@ -12,23 +12,13 @@ import numpy as np
 import pytest
 from nbclient import NotebookClient
 
-import helpers
 from helpers.config import Config
 from helpers.odometry import OdometryResult
 from helpers.pipeline import Slam
 from helpers.viz.live import LiveView
-from helpers.waypoints import loop_waypoints
 
 # A short loop has few submaps; no edges back: the view shows odometry and loops.
 SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3), pose_graph=dict(edges_back=1))
-
-
-@pytest.fixture(scope="module")
-def short_loop(tmp_path_factory):
-    """A 200 m loop flown once and 30 m past its start, as in test_pipeline."""
-    path = tmp_path_factory.mktemp("loop") / "loop.csv"
-    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
-    return helpers.create_dataset(waypoints_path=path)
 
 
 def true_odometry(data, skip: int) -> OdometryResult:

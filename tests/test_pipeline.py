@@ -18,22 +18,8 @@ from helpers.health import assess
 from helpers.output import write_run
 from helpers.pipeline import Edge, Slam, build_pose_graph, run_slam
 from helpers.trajectory import read_tum
-from helpers.waypoints import loop_waypoints
 
 SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3))  # a short loop has few submaps
-
-
-@pytest.fixture(scope="module")
-def short_loop_csv(tmp_path_factory):
-    """The waypoints of a 200 m loop flown once and 30 m past its start (115 scans)."""
-    path = tmp_path_factory.mktemp("loop") / "loop.csv"
-    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
-    return path
-
-
-@pytest.fixture(scope="module")
-def short_loop(short_loop_csv):
-    return helpers.create_dataset(waypoints_path=short_loop_csv)
 
 
 @pytest.fixture(scope="module")

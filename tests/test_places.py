@@ -4,7 +4,6 @@ descriptors and closed with true loops, and a recognition only counts once the n
 import dataclasses
 
 import numpy as np
-import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.config import Config
@@ -34,17 +33,6 @@ def test_a_recognition_counts_only_when_the_one_before_put_the_flight_in_the_sam
     assert places.confirmed(38, later, correction @ about @ later)  # ... but it confirms the next that agrees
     # an agreeing recognition too long after the last is not a confirmation
     assert not places.confirmed(38 + CONFIRM_NODES + 1, later, correction @ about @ later)
-
-
-@pytest.fixture(scope="module")
-def short_loop(tmp_path_factory):
-    """A 200 m loop over the default scene flown once and 30 m past its start (115 scans), as test_pipeline's."""
-    import helpers
-    from helpers.waypoints import loop_waypoints
-
-    path = tmp_path_factory.mktemp("loop") / "loop.csv"
-    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
-    return helpers.create_dataset(waypoints_path=path)
 
 
 def test_after_a_blind_stretch_the_revisit_a_missed_turn_hid_is_recognised(short_loop):

@@ -225,17 +225,6 @@ def test_after_a_loop_the_graph_moves_the_old_places_by_the_weighted_measurement
     np.testing.assert_allclose(graph.positions([0, 20]), [expected_0, expected_20], atol=1e-6)
 
 
-@pytest.fixture(scope="module")
-def short_loop(tmp_path_factory):
-    """A 200 m loop over the default scene flown once and 30 m past its start (115 scans), as test_pipeline's."""
-    import helpers
-    from helpers.waypoints import loop_waypoints
-
-    path = tmp_path_factory.mktemp("loop") / "loop.csv"
-    np.savetxt(path, loop_waypoints(40.0, 30.0, 20.0, overlap=30.0), delimiter=",", header="x,y", comments="")
-    return helpers.create_dataset(waypoints_path=path)
-
-
 def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
     from helpers.config import Config
     from helpers.evaluation import grade_loops, run_metrics
