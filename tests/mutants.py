@@ -77,8 +77,8 @@ MUTANTS = {
     "the loop search starts ICP from the odometry pose": (
         "tests/test_uncertainty.py",
         "helpers/loopsearch.py",
-        "            T_fixed_moving=scan_pose if starts is None else starts[submap_id],\n",
-        "            T_fixed_moving=scan_pose,\n",
+        "    starts = [scan_pose if starts is None else starts[k] for k in tried]\n",
+        "    starts = [scan_pose for k in tried]\n",
     ),
     "a run with GNSS keeps the fixed sigmas": (
         "tests/test_gnss.py",
