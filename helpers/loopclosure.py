@@ -206,7 +206,7 @@ class LoopCloser:
             self.places.closed()
         elif self.places is not None and self.places.lost and not candidates.closed:
             # 3. After a blind stretch the odometry may be far off: the places the scan's descriptors recognise.
-            recognised = self._recognised(node, cloud, pose, clouds, poses)
+            recognised = self._recognised(node, cloud, pose, clouds, poses, candidates.radius)
             if recognised is not None:
                 candidates, (closure, best, pinned) = recognised
         if not len(candidates.tried_ids):
@@ -243,15 +243,15 @@ class LoopCloser:
             log.info("loop %d -> %d left out: ground too flat (constraint %.4f)", match.i, match.j, pinned)
         return None, match.surface_rmse, pinned
 
-    def _recognised(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses):
+    def _recognised(self, node: int, cloud: np.ndarray, pose: np.ndarray, clouds, poses, radius: np.ndarray):
         """(candidates, best scan) of the submaps the scan's descriptors recognise (:mod:`helpers.places`),
         checked by ICP from the recognised pose as any candidate; the loop edge only if the recognition
-        before agreed. None if nothing was recognised."""
+        before agreed. None if nothing was recognised. ``radius``: what the query's own search reached
+        around each submap, kept in the candidates (the descriptors looked everywhere)."""
         settings, count = self.settings, eligible_submaps(len(self.submaps), self.settings)
         ids, starts = self.places.recognise(node, poses, count)
         if not len(ids):
             return None
-        radius = np.full(len(self.submaps), np.inf)  # no search radius: wherever the descriptors say
         candidates = verified(
             self.submaps.points, cloud, ids, starts, self.icp, settings, n_eligible=count, radius=radius
         )

@@ -43,6 +43,7 @@ steps, whose information says they pinned little.
 from __future__ import annotations
 
 import logging
+from typing import NamedTuple
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -65,6 +66,21 @@ AGREE_M, AGREE_DEG = 2.0, 2.0  # ... that puts the flight within this of the sam
 # centimetres over a dozen steps, a recognition is off by a few; a place recognised wrongly lies metres away)
 
 
+class _Centre(NamedTuple):
+    """A submap's centre scan as place recognition keeps it."""
+
+    points: np.ndarray  # (N, 3), the feature grid's
+    described: np.ndarray | None  # indices of the points with descriptors (None: not described yet)
+    descriptors: np.ndarray | None  # (K, 33)
+    voters: np.ndarray | None  # float32, at most MAX_STORED_DESCRIPTORS of the descriptors: what the vote searches
+
+
+def _centre(points, described, descriptors) -> _Centre:
+    """A :class:`_Centre`, its voters strided from ``descriptors`` once (None while undescribed)."""
+    voters = None if descriptors is None else _strided(descriptors, MAX_STORED_DESCRIPTORS)
+    return _Centre(points, described, descriptors, voters)
+
+
 class PlaceRecognition:
     """The descriptors of each submap's centre scan, and the blind-stretch state that turns the search on.
 
@@ -75,7 +91,7 @@ class PlaceRecognition:
     def __init__(self, config: Config) -> None:
         self.config = config
         self.n = config.map.n_scans_per_submap
-        self.places: dict[int, tuple] = {}  # submap id -> its centre scan's (points, described, descriptors)
+        self.places: dict[int, _Centre] = {}  # submap id -> its centre scan
         self.blind = 0  # steps in a row that fell back
         self.lost = False
         self.last: tuple[int, np.ndarray] | None = None  # (node, correction) of the last recognition
@@ -92,7 +108,7 @@ class PlaceRecognition:
         if node == centre_scan_id(node // self.n, self.n):  # its descriptors, if made; else made when first asked
             frame = frame if isinstance(frame, Frame) else self.current()
             described = None if frame.features is None else frame.described()
-            self.places[node // self.n] = (frame.points, described, frame.features)
+            self.places[node // self.n] = _centre(frame.points, described, frame.features)
 
     def current(self) -> Frame:
         """The frame of the scan followed last, described."""
@@ -110,7 +126,7 @@ class PlaceRecognition:
         ids = [k for k in range(eligible) if k in self.places]
         if not ids:
             return []
-        stored = [_strided(self._place(k)[2], MAX_STORED_DESCRIPTORS) for k in ids]
+        stored = [self._place(k).voters for k in ids]
         owner = np.repeat(np.asarray(ids), [len(f) for f in stored])
         query = _strided(_described(frame, self.config).features, MAX_QUERY_DESCRIPTORS)
         if len(owner) < 2 or not len(query):
@@ -134,7 +150,7 @@ class PlaceRecognition:
         self.asked, current, features = node, self.current(), self.config.features
         ids, starts = [], []
         for submap_id, votes in self.vote(current, eligible):
-            points, described, descriptors = self._place(submap_id)
+            points, described, descriptors, _ = self._place(submap_id)
             matches = match_features(current.features, descriptors, features.match_threshold, features.match_ratio)
             on_current, on_centre = current.described()[matches[:, 0]], described[matches[:, 1]]
             try:
@@ -147,12 +163,12 @@ class PlaceRecognition:
             starts.append(np.asarray(poses[centre_scan_id(submap_id, self.n)], dtype=float) @ T)
         return np.asarray(ids, dtype=int), np.asarray(starts, dtype=float).reshape(-1, 4, 4)
 
-    def _place(self, submap_id: int) -> tuple:
-        """Submap ``submap_id``'s centre scan as (points, described, descriptors), described once."""
-        points, _, descriptors = self.places[submap_id]
-        if descriptors is None:  # a tracking run described it only if the odometry needed it
-            frame = describe(Frame(points, None, points[:0], {}), self.config)
-            self.places[submap_id] = points, frame.described(), frame.features
+    def _place(self, submap_id: int) -> _Centre:
+        """Submap ``submap_id``'s centre scan, described once."""
+        centre = self.places[submap_id]
+        if centre.descriptors is None:  # a tracking run described it only if the odometry needed it
+            frame = describe(Frame(centre.points, None, centre.points[:0], {}), self.config)
+            self.places[submap_id] = _centre(centre.points, frame.described(), frame.features)
         return self.places[submap_id]
 
     def confirmed(self, node: int, pose: np.ndarray, start: np.ndarray) -> bool:
