@@ -27,10 +27,9 @@ tracking mode as ``bench_long.py`` flies it.
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
 from pathlib import Path
+
+from bench_flights import child_result
 
 HERE = Path(__file__).resolve().parent
 
@@ -99,11 +98,10 @@ def main() -> None:
     )
     total = {"queries": 0, "scans": 0, "run": 0, "other": 0, "lost": 0, "gap": 0.0}
     for name in args.flights:
-        done = subprocess.run([sys.executable, "-c", CHILD, name, str(HERE)], capture_output=True, text=True)
-        if done.returncode != 0:
-            print(f"{name:12s} failed: {done.stderr.strip().splitlines()[-1]}", flush=True)
+        r, error = child_result(CHILD, name, str(HERE))
+        if r is None:
+            print(f"{name:12s} failed: {error}", flush=True)
             continue
-        r = json.loads(done.stdout.strip().splitlines()[-1])
         q = r["queries"]
         other = [x for x in q if x["ours"] != x["reference"]]
         gap = max((x["ours"] - x["reference"] for x in other), default=0.0)

@@ -81,6 +81,15 @@ print(json.dumps({"scans": len(data), "accepted": m["n_accepted"], "loops": m["n
 """
 
 
+def child_result(child: str, *args: str, env=None) -> tuple[dict | None, str]:
+    """Run ``child`` (Python source) in a fresh interpreter with ``args``: its last line of output read as
+    JSON, or None and the last line of its error (each benchmark flies each flight in a process of its own)."""
+    out = subprocess.run([sys.executable, "-c", child, *args], capture_output=True, text=True, env=env)
+    if out.returncode != 0:
+        return None, out.stderr.strip().splitlines()[-1] if out.stderr.strip() else f"exit code {out.returncode}"
+    return json.loads(out.stdout.strip().splitlines()[-1]), ""
+
+
 def build_flight(options: dict):
     """(lazy dataset, fitted config) of the flight ``options["name"]`` (see the module's docstring)."""
     import numpy as np
@@ -219,13 +228,10 @@ def main() -> None:
         options = {"name": name, "laps": args.laps, "swing": args.swing, "set": args.set, "map_error": args.map_error,
                    "seed": seed, "gnss": args.gnss}  # fmt: skip
         label = name if args.seeds == [0] else f"{name}/{seed}"
-        out = subprocess.run(
-            [sys.executable, "-c", CHILD, json.dumps(options), str(HERE)], capture_output=True, text=True, env=env
-        )
-        if out.returncode != 0:
-            print(f"{label:12} failed: {out.stderr.strip().splitlines()[-1] if out.stderr.strip() else out.returncode}")
+        r, error = child_result(CHILD, json.dumps(options), str(HERE), env=env)
+        if r is None:
+            print(f"{label:12} failed: {error}")
             continue
-        r = json.loads(out.stdout.strip().splitlines()[-1])
         if args.save:
             with args.save.open("a") as saved:
                 saved.write(json.dumps({"flight": label, "swing": args.swing, "set": args.set, **r}) + "\n")

@@ -6,8 +6,9 @@ A run asks :mod:`helpers.places` only after a blind stretch, and only at
 queries the loop search closed nothing at, so on most flights it is never
 asked and a wrong recognition would be rare to see. Here every flight runs
 with the loop search's own candidates taken away (``find_loop_candidates``
-finds none) and place recognition asked from the first query on, every
-``n_scans_per_submap`` nodes, never stopping: every loop of the run is a
+finds none) and place recognition asked from the first query on, as often as
+a run asks it (every second submap's worth of nodes, every submap's while a
+recognition waits to be confirmed), never stopping: every loop of the run is a
 recognised one, the confirmation by the recognition before it included.
 Each flight runs once, in a fresh process, with its parameters fitted as
 ``bench_flights.py`` fits them (two laps on tiles), and prints:
@@ -21,10 +22,9 @@ Each flight runs once, in a fresh process, with its parameters fitted as
 from __future__ import annotations
 
 import argparse
-import json
-import subprocess
-import sys
 from pathlib import Path
+
+from bench_flights import child_result
 
 HERE = Path(__file__).resolve().parent
 
@@ -50,7 +50,7 @@ def always(self, node, frame, fell_back):  # lost from the first scan on, and ne
 
 def counted(self, node, poses, eligible):
     found = recognise(self, node, poses, eligible)
-    if self.asked == node:  # it ran (not skipped: one asked within n_scans_per_submap nodes before)
+    if self.asked == node:  # it ran (not skipped: one was asked too few nodes before)
         asked.append(node)
     return found
 
@@ -78,11 +78,10 @@ def main() -> None:
     args = parser.parse_args()
     print(f"{'flight':14s} {'asked':>5s} {'loops':>9s} {'worst m':>8s} {'deg':>5s} {'ATE m':>6s} {'s':>5s}")
     for name in args.flights:
-        done = subprocess.run([sys.executable, "-c", CHILD, name, str(HERE)], capture_output=True, text=True)
-        if done.returncode != 0:
-            print(f"{name:14s} failed: {done.stderr.strip().splitlines()[-1]}", flush=True)
+        r, error = child_result(CHILD, name, str(HERE))
+        if r is None:
+            print(f"{name:14s} failed: {error}", flush=True)
             continue
-        r = json.loads(done.stdout.strip().splitlines()[-1])
         print(
             f"{name:14s} {r['asked']:5d} {r['loops']:5d} ({r['false']}) {r['worst_m']:8.2f} {r['worst_deg']:5.2f}"
             f" {r['ate']:6.2f} {r['s']:5.0f}",
