@@ -55,6 +55,7 @@ from .matching import match_features
 from .preparation import Frame, describe
 from .registration import robust_fit
 from .submaps import centre_scan_id
+from .threads import threads
 
 log = logging.getLogger(__name__)
 
@@ -131,7 +132,7 @@ class PlaceRecognition:
         query = _strided(_described(frame, self.config).features, MAX_QUERY_DESCRIPTORS)
         if len(owner) < 2 or not len(query):
             return []
-        distance, index = cKDTree(np.vstack(stored)).query(query, k=2)
+        distance, index = cKDTree(np.vstack(stored)).query(query, k=2, workers=threads())
         passed = distance[:, 0] < self.config.features.match_ratio * distance[:, 1]
         votes = np.bincount(owner[index[passed, 0]], minlength=eligible)
         best = np.argsort(-votes, kind="stable")[: self.config.loop_closure.max_attempts]
