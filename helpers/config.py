@@ -239,7 +239,8 @@ class LoopClosureConfig(BoundedTable):
     )
     min_constraint: float = param(
         0.005,
-        "a loop edge must pin the motion: ICP's weakest over strongest direction at least this (0: the reference)",
+        "a loop edge must pin the motion: ICP's weakest over strongest direction, times the share of the scan paired, "
+        "at least this (0: the reference)",
     )
     place_recognition: bool = param(
         True,

@@ -98,6 +98,12 @@ MUTANTS = {
         "        elif self.places is not None and self.places.lost and not candidates.closed:\n",
         "        elif False:\n",
     ),
+    "a loop's pin test ignores how much of the scan paired": (
+        "tests/test_loopclosure.py",
+        "helpers/icp_service.py",
+        "        return overlap * constraint\n",
+        "        return constraint\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",

@@ -397,3 +397,24 @@ def test_the_health_report_counts_a_revisit_where_the_loop_closer_would_search()
         expected = np.sum((radius_after(since, settings) > 9.0) & (since > 4 * 7.9))
         assert revisits(result, flown) == (expected, expected)
         assert (expected > 0) == (growth > 0)
+
+
+def test_a_match_over_part_of_the_scan_pins_it_by_that_share():
+    """The loop's pin test is per point of the scan: over ground whose every half
+    has the same normals (two whole periods of a wave each way), a fixed cloud
+    that holds half of the scan's footprint pins half as much as the whole one,
+    and a match that pairs nothing pins nothing."""
+    rng = np.random.default_rng(11)
+
+    def wave(x_from, x_to, n):
+        xy = np.column_stack([rng.uniform(x_from, x_to, n), rng.uniform(0.0, 40.0, n)])
+        z = 2.0 * (np.sin(2 * np.pi * xy[:, 0] / 10.0) + np.sin(2 * np.pi * xy[:, 1] / 10.0))
+        return np.column_stack([xy, z])
+
+    icp = IcpService.from_config(Config().registration)
+    scan, whole, half = wave(0.0, 40.0, 8000), wave(0.0, 40.0, 8000), wave(0.0, 20.0, 4000)
+    pinned_whole = icp.constraint(moving=scan, fixed=whole, T_fixed_moving=np.eye(4))
+    pinned_half = icp.constraint(moving=scan, fixed=half, T_fixed_moving=np.eye(4))
+    assert pinned_whole > 0.05  # the wave's slopes face every way: well pinned
+    assert 0.4 < pinned_half / pinned_whole < 0.6, (pinned_half, pinned_whole)
+    assert icp.constraint(moving=scan, fixed=whole, T_fixed_moving=pose(0.0, (100.0, 0.0, 0.0))) == 0.0
