@@ -242,6 +242,12 @@ class LoopClosureConfig(BoundedTable):
         "a loop edge must pin the motion: ICP's weakest over strongest direction, times the share of the scan paired, "
         "at least this (0: the reference)",
     )
+    overlap_rounds: int = param(
+        20,
+        "the best scan match is registered again on the part of the scan over the old scan's footprint, until "
+        "that part stops changing, at most this many times (helpers.overlap.on_overlap; 0: the whole scan, the "
+        "reference)",
+    )
     place_recognition: bool = param(
         True,
         "after steps that fell back in a row, also look for the scan's place by its descriptors, wherever the "
@@ -263,6 +269,7 @@ class LoopClosureConfig(BoundedTable):
         self._within("max_attempts", 1, MAX_EDGES_BACK)
         self._within("max_returned", 1, MAX_EDGES_BACK)
         self._within("icp_max_iterations", 1, MAX_ITERATIONS)
+        self._within("overlap_rounds", 0, MAX_ITERATIONS)
         self._check("best_scan_stop", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
         self._check("place_recognition", lambda v: isinstance(v, bool), "true or false")
         self._check("min_constraint", lambda v: 0 <= v <= 1, "a fraction in [0, 1]")
@@ -312,6 +319,7 @@ REFERENCE_WORKFLOW = {
         "skip_after_loop": 0,
         "skip_after_closed_place": 0,
         "best_scan_stop": 0.0,
+        "overlap_rounds": 0,
         "place_recognition": False,
     },
     "pose_graph": {"edges_back": 1, "graph_weights": "identity", "loop_kernel": "none"},

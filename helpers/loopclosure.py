@@ -7,7 +7,8 @@ reaches (``[loop_closure] search``: ``"growth"``, :func:`search_radius` from
 :func:`radius_after`; ``"uncertainty"``, the graph's relative covariance and
 :func:`helpers.uncertainty.mahalanobis_gate`), which places were closed just
 before (``skip_after_loop``), the check of the candidates
-(:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`)
+(:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`),
+registered again on the part of it over the old scan (:func:`helpers.overlap.on_overlap`, ``overlap_rounds``),
 and the acceptance of a loop edge (:meth:`LoopCloser.accepts`). After a
 blind stretch it also asks :mod:`helpers.places` which old places the
 scan's descriptors recognise, wherever the odometry puts the flight. Figures,
@@ -47,6 +48,7 @@ from .loopsearch import (
     search_radius,
     verified,
 )
+from .overlap import on_overlap
 from .submaps import SubmapIndex, centre_scan_id, scan_ids_of
 from .uncertainty import RelativeUncertainty, mahalanobis_gate
 
@@ -228,12 +230,19 @@ class LoopCloser:
         )
 
     def _best_scan(self, node: int, cloud: np.ndarray, candidates: LoopCandidates, clouds, poses):
-        """(loop edge or None, its RMSE, its constraint) of the best scan of the matching ``candidates``."""
+        """(loop edge or None, its RMSE, its constraint) of the best scan of the matching ``candidates``; a
+        match that fits is registered again on the old scan's footprint (``overlap_rounds``), then judged."""
         settings = self.settings
         if not len(candidates.ids):
             return None, float("inf"), float("nan")
-        n = self.submaps.n_scans_per_submap
+        n, cap = self.submaps.n_scans_per_submap, settings.icp_max_iterations
         match = best_scan_registration(cloud, node, candidates, clouds, poses, n, self.icp, settings)
+        fits = match.surface_rmse < settings.rmse_threshold
+        if fits and settings.overlap_rounds and hasattr(self.icp, "align"):  # again on the old scan's footprint
+            fit = on_overlap(cloud, clouds[match.i], match.relative, self.icp, settings.overlap_rounds, cap)
+            if fit is not None:  # scored on the whole scan, as every best match is
+                score = self.icp.score(moving=cloud, fixed=clouds[match.i], T_fixed_moving=fit.T_fixed_moving)
+                match = Edge(match.i, match.j, fit.T_fixed_moving, score, information=fit.information)
         pinned = float("nan")
         if match.surface_rmse < settings.rmse_threshold:
             pinned = self.icp.constraint(moving=cloud, fixed=clouds[match.i], T_fixed_moving=match.relative)

@@ -30,6 +30,15 @@ ground the second registration stayed near it. The edges back register whole
 scans: cropped, they left the default flight's map worse and their step
 lengths no truer (the ray rows pull those longer steps more than the leading
 edge does; ``benchmarks/bench_bias.py``).
+
+A loop edge pairs a scan with one from an earlier pass, often half over
+ground that pass never saw (the first scans of a second lap come back over
+the start from outside it). Registered whole, such a scan slid 1-3.8 m
+towards pairing more of itself: a false loop. :func:`on_overlap` registers
+the loop's best match again on the part of the scan over the old scan's
+footprint, with no margin (the pose is an ICP answer by then, not a guess),
+crops again where that puts the scan, and so on until the part kept stops
+changing: each round leaves out more of the ground the old scan never saw.
 """
 
 from __future__ import annotations
@@ -40,6 +49,7 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from .config import RegistrationConfig
+from .geometry import transform_points
 from .icp import IcpCloud, icp_cloud
 from .icp_service import IcpService
 
@@ -135,3 +145,27 @@ def overlap_icp(
         if cropped is not source:  # the result, information included, of the registration on the overlap
             refined = icp.align(moving=cropped, fixed=target, T_fixed_moving=T, max_iterations=cap)
     return refined
+
+
+def on_overlap(
+    moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, icp: IcpService, rounds: int, cap=None
+):
+    """``moving`` (N, 3) registered onto ``fixed`` (M, 3) on its part over ``fixed``'s footprint (no margin)
+    where ``T_fixed_moving`` puts it, then cropped again where that registration puts it, and so on: an
+    :class:`helpers.icp.IcpResult` (calibrated information), or None when the footprint holds every point
+    (or fewer than :data:`MIN_KEPT`) at ``T_fixed_moving``, which then stands.
+
+    It stops when the part kept is one it kept before (a fixed point, or two near-equal answers in turn as
+    a few boundary points go in and out) or after ``rounds`` registrations. ``cap``: ICP iterations a round."""
+    outline = footprint(fixed)
+    target = icp.ready(fixed) if icp.metric != "point-to-point" else fixed  # as IcpService.__call__ registers
+    T, fit, seen = np.asarray(T_fixed_moving, dtype=np.float64), None, set()
+    for _ in range(rounds):
+        keep = inside(outline, transform_points(moving, T), 0.0)
+        key = np.packbits(keep).tobytes()
+        if key in seen or keep.sum() < MIN_KEPT or (fit is None and keep.all()):
+            break
+        seen.add(key)
+        fit = icp.align(moving=moving[keep], fixed=target, T_fixed_moving=T, max_iterations=cap)
+        T = fit.T_fixed_moving
+    return fit

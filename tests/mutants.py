@@ -104,6 +104,12 @@ MUTANTS = {
         "        return overlap * constraint\n",
         "        return constraint\n",
     ),
+    "a loop's best match is registered again on the whole scan": (
+        "tests/test_loopclosure.py",
+        "helpers/overlap.py",
+        "        keep = inside(outline, transform_points(moving, T), 0.0)\n",
+        "        keep = np.ones(len(moving), dtype=bool)\n",
+    ),
     "ICP returns its initial guess": (
         "tests/test_registration.py",
         "helpers/icp.py",

@@ -418,3 +418,66 @@ def test_a_match_over_part_of_the_scan_pins_it_by_that_share():
     assert pinned_whole > 0.05  # the wave's slopes face every way: well pinned
     assert 0.4 < pinned_half / pinned_whole < 0.6, (pinned_half, pinned_whole)
     assert icp.constraint(moving=scan, fixed=whole, T_fixed_moving=pose(0.0, (100.0, 0.0, 0.0))) == 0.0
+
+
+def half_over_old_ground(yaw_deg: float, ahead: float):
+    """A 40 x 20 m strip of hilly ground (80 hills 3-6 m wide, 0.5-1 m high) and a second strip ``ahead`` m
+    further along it, turned by ``yaw_deg``: part of it over ground the first never saw, as the first scans of
+    a second lap come back over the start. (moving points in their own frame, fixed points, true T_fixed_moving)."""
+    rng = np.random.default_rng(3)
+    x, y = np.meshgrid(np.arange(-60.0, 60.0, 0.5), np.arange(-60.0, 60.0, 0.5))
+    x, y = x.ravel(), y.ravel()
+    centres, height, width = rng.uniform(-60.0, 60.0, (80, 2)), rng.uniform(0.5, 1.0, 80), rng.uniform(3.0, 6.0, 80)
+    squared = (x[:, None] - centres[:, 0]) ** 2 + (y[:, None] - centres[:, 1]) ** 2
+    z = (height * np.exp(-squared / (2.0 * width**2))).sum(axis=1) + rng.normal(0.0, 0.02, x.size)
+    ground = np.column_stack([x, y, z])
+    T_true = pose(np.radians(yaw_deg), (ahead, 1.0, 0.0))
+    in_moving = (ground - T_true[:3, 3]) @ T_true[:3, :3]
+    strip = (np.abs(ground[:, 0]) <= 20) & (np.abs(ground[:, 1]) <= 10)
+    moving_strip = (np.abs(in_moving[:, 0]) <= 20) & (np.abs(in_moving[:, 1]) <= 10)
+    return in_moving[moving_strip], ground[strip], T_true
+
+
+OVERLAP_ICP = IcpService(metric="point-to-plane", inlier_distance=2.0, tolerance=1e-4, backend="small_gicp")
+
+
+@pytest.mark.parametrize(("yaw_deg", "ahead"), [(0.0, 24.0), (10.0, 20.0), (-5.0, 26.0)])
+def test_a_loop_match_registered_on_the_overlap_leaves_the_pull_of_the_unseen_ground(yaw_deg, ahead):
+    """Registered whole from the true pose, the strip slides back towards the old one (its points beyond the
+    old strip's edge pair with the edge); registered again on its part over the old strip, round after round,
+    it ends on the truth. Where every point already lies over the old strip there is nothing to crop."""
+    from helpers.geometry import relative_pose_error
+    from helpers.overlap import on_overlap
+
+    moving, fixed, T_true = half_over_old_ground(yaw_deg, ahead)
+    whole = OVERLAP_ICP(moving=moving, fixed=fixed, T_fixed_moving=T_true, max_iterations=50)
+    slid_m, _ = relative_pose_error(T_true, whole.T_fixed_moving)
+    assert slid_m > 0.1, slid_m
+    fit = on_overlap(moving, fixed, whole.T_fixed_moving, OVERLAP_ICP, rounds=20, cap=50)
+    error_m, error_deg = relative_pose_error(T_true, fit.T_fixed_moving)
+    assert error_m < 0.01 and error_deg < 0.05, (error_m, error_deg)
+    assert fit.information is not None and np.linalg.eigvalsh(fit.information).min() > 0
+    inside_old = fixed[(np.abs(fixed[:, 0]) <= 15) & (np.abs(fixed[:, 1]) <= 5)]
+    assert on_overlap(inside_old, fixed, np.eye(4), OVERLAP_ICP, rounds=20) is None
+
+
+def test_a_loop_closer_keeps_the_overlap_answer_and_the_reference_the_whole_one():
+    """The loop closer's best match, registered again on the overlap (``overlap_rounds``), is the loop edge,
+    scored on the whole scan and with the overlap's information; at 0 (the reference) the whole scan's answer
+    stands, slid back towards the old strip. (The pin test is left out: this ground is mostly flat.)"""
+    from helpers.geometry import relative_pose_error
+
+    moving, fixed, T_true = half_over_old_ground(0.0, 24.0)
+    clouds, poses = [fixed] * 3, np.array([np.eye(4)] * 3)
+    candidates = LoopCandidates(np.array([0]), np.array([0.1]), np.array([T_true]))
+    errors = {}
+    for rounds in (20, 0):
+        closer = LoopCloser(
+            settings(0, rmse_threshold=THRESHOLD, min_constraint=0.0, overlap_rounds=rounds), MapConfig(), OVERLAP_ICP
+        )
+        edge, rmse, _ = closer._best_scan(9, moving, candidates, clouds, poses)
+        assert edge is not None and (edge.i, edge.j) == (0, 9) and rmse == edge.surface_rmse
+        assert rmse == pytest.approx(OVERLAP_ICP.score(moving=moving, fixed=fixed, T_fixed_moving=edge.relative))
+        errors[rounds] = relative_pose_error(T_true, edge.relative)[0]
+    assert errors[20] < 0.01 < 0.1 < errors[0], errors
+    assert Config.reference().loop_closure.overlap_rounds == 0

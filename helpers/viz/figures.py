@@ -16,6 +16,7 @@ from .graph_figures import (
 from .loop_figures import (
     candidates_figure,
     loop_errors_figure,
+    overlap_rounds_figure,
     pair_overlay_figure,
     queries_figure,
     query_figure,
@@ -33,6 +34,7 @@ __all__ = [
     "kernels_figure",
     "loop_errors_figure",
     "loop_weights_figure",
+    "overlap_rounds_figure",
     "pair_overlay_figure",
     "pose_graph_figure",
     "position_errors_figure",

@@ -211,6 +211,43 @@ def rmse_offsets_figure(offsets, point_to_point, surface):
     return fig
 
 
+def overlap_rounds_figure(moving, fixed, whole, kept, errors_m):
+    """A loop's best match on the old scan's footprint: (top) the old scan (cyan) and its outline from above
+    (black), in its frame, with the current scan where the whole scan's registration ``whole`` (4 x 4) puts
+    it, its points over the outline (``kept``, the first round's crop; pink) and beyond it (grey); (bottom)
+    how far each answer lies from the truth, round 0 being the whole scan's."""
+    from scipy.spatial import ConvexHull
+
+    fig = plt.figure(figsize=(FIGURE_WIDTH, 5.8), constrained_layout=True)
+    grid_spec = fig.add_gridspec(2, 2, height_ratios=[1.3, 1], width_ratios=[1.2, 1])
+    top, rounds, key = (
+        fig.add_subplot(grid_spec[0, :]),
+        fig.add_subplot(grid_spec[1, 0]),
+        fig.add_subplot(grid_spec[1, 1]),
+    )
+    moved, kept = transform_points(moving, whole), np.asarray(kept, dtype=bool)
+    top.scatter(fixed[:, 1], fixed[:, 0], s=1, color=COLORS["fixed"], linewidths=0, alpha=0.35)
+    hull = fixed[ConvexHull(fixed[:, :2]).vertices]
+    top.fill(hull[:, 1], hull[:, 0], fill=False, edgecolor="black", lw=1.5)
+    key.plot([], [], "-", color="black", lw=1.5, label="the old scan's outline from above")
+    key.plot([], [], ".", ms=8, color=COLORS["fixed"], label="the old scan")
+    for points, color, label in (
+        (moved[kept], COLORS["moving"], "the current scan over the outline: registered again"),
+        (moved[~kept], GREY, "the current scan beyond it: left out"),
+    ):
+        top.scatter(points[:, 1], points[:, 0], s=2, color=color, linewidths=0, alpha=0.8)
+        key.plot([], [], ".", ms=8, color=color, label=label)
+    top.invert_xaxis()
+    top.set(aspect="equal", xlabel="y (m)", ylabel="x, forward (m)", title="where the whole scan's answer puts it")
+    key.axis("off")
+    key.legend(loc="center", fontsize=9, frameon=False)
+    rounds.plot(np.arange(len(errors_m)), errors_m, "o-", color=COLORS["loop"], lw=2)
+    rounds.set(xlabel="round (0: the whole scan)", ylabel="from the truth (m)", ylim=(0, None))
+    rounds.set_xticks(np.arange(len(errors_m)))
+    grid(rounds)
+    return fig
+
+
 def queries_figure(nodes, tried, best, accepted, thresholds: dict):
     """Every loop query: each submap registered (small grey dots), the best
     scan-to-scan match of queries that found a submap (orange if it became
