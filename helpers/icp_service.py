@@ -112,6 +112,11 @@ class IcpService:
         while len(self._prepared) > PREPARED_CLOUDS:
             self._prepared.popitem(last=False)
 
+    def target(self, points: np.ndarray):
+        """``points`` as this service's ICP takes them: prepared through the cache, or the bare points for
+        point-to-point ICP (whose cost needs no normals)."""
+        return points if self.metric == "point-to-point" else self.ready(points)
+
     def align(self, *, moving, fixed, T_fixed_moving: np.ndarray, max_iterations: int | None = None):
         """ICP from ``T_fixed_moving``; returns the refined ``(T_fixed_moving, rmse)`` (point-to-point)
         as an :class:`helpers.icp.IcpResult` with its ``information``.
@@ -142,10 +147,8 @@ class IcpService:
     def __call__(self, *, moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, max_iterations=None):
         """Register ``moving`` onto ``fixed`` (arrays, prepared through the cache)
         and score the result: ``(T_fixed_moving, surface_rmse)``, an :class:`helpers.icp.IcpResult`."""
-        source, target = self.ready(moving), self.ready(fixed)
-        ready_fixed = target  # what the score measures against (normals, k-d tree), whatever ICP aligns on
-        if self.metric == "point-to-point":
-            source, target = moving, fixed
+        source, target = self.target(moving), self.target(fixed)
+        ready_fixed = self.ready(fixed)  # what the score measures against (normals, k-d tree), whatever ICP aligns on
         fit = self.align(moving=source, fixed=target, T_fixed_moving=T_fixed_moving, max_iterations=max_iterations)
         T = fit.T_fixed_moving
         # the alignment's last pass paired these points with this cloud at T: the score reuses it

@@ -5,7 +5,7 @@ by ICP, then turn the best scan-to-scan match into a loop edge.
 which submaps are old enough (:func:`eligible_submaps`), how far the search
 reaches (``[loop_closure] search``: ``"growth"``, :func:`search_radius` from
 :func:`radius_after`; ``"uncertainty"``, the graph's relative covariance and
-:func:`helpers.uncertainty.mahalanobis_gate`), which places were closed just
+:func:`mahalanobis_gate`), which places were closed just
 before (``skip_after_loop``), the check of the candidates
 (:func:`find_loop_candidates`), the best scan (:func:`best_scan_registration`),
 registered again on the part of it over the old scan (:func:`helpers.overlap.on_overlap`, ``overlap_rounds``),
@@ -43,13 +43,14 @@ from .loopsearch import (
     distance_flown_since,
     eligible_submaps,
     find_loop_candidates,
+    mahalanobis_gate,
     radius_after,
     search_radius,
     verified,
 )
 from .overlap import on_overlap
 from .submaps import SubmapIndex, centre_scan_id
-from .uncertainty import RelativeUncertainty, mahalanobis_gate
+from .uncertainty import RelativeUncertainty
 
 log = logging.getLogger(__name__)
 

@@ -5,7 +5,8 @@ report and the figures use the same rules).
 Two searches (``[loop_closure] search``): ``"growth"``, a radius grown with
 the distance flown since the submap (:func:`radius_after`), and
 ``"uncertainty"``, the radius the graph's relative covariance allows
-(:func:`helpers.uncertainty.mahalanobis_gate`). :func:`closed_places` says
+(:func:`mahalanobis_gate`, from the covariances
+:class:`helpers.uncertainty.RelativeUncertainty` gives). :func:`closed_places` says
 which old places have just closed a loop, so that a query there can wait.
 """
 
@@ -20,7 +21,6 @@ import numpy as np
 from .config import LoopClosureConfig
 from .errors import SlamError
 from .geometry import check_points, check_pose
-from .uncertainty import mahalanobis_gate
 
 log = logging.getLogger(__name__)
 
@@ -182,7 +182,7 @@ def find_loop_candidates(
     2. Keep those whose centre is nearer than :func:`search_radius` to the
        scan's position; or, given ``covariances`` ((E, 3, 3), each eligible
        centre's position relative to the scan, m²), those in reach of
-       :func:`helpers.uncertainty.mahalanobis_gate` (``search_sigmas``;
+       :func:`mahalanobis_gate` (``search_sigmas``;
        the place's extent: the fixed radius plus ``extents``, (E,) m; the
        loop closer gives the centres where the graph puts them).
     3. Sort them by distance; if the nearest is among the submap ids
@@ -254,3 +254,30 @@ def _check_search(submaps, centres, current_submap_id) -> None:
         raise SlamError(
             f"current_submap_id {current_submap_id} is not among the {min(len(centres), len(submaps))} submaps given"
         )
+
+
+def mahalanobis_gate(
+    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius, sigmas: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Which old places the scan at ``position`` may truly be over, and the
+    search radius around each.
+
+    Place ``k`` (its centre, map frame) is in reach when the offset to it,
+    less ``radius`` (the place's extent, m; one number or one per place), is within
+    ``sigmas`` of its uncertainty: ``d' = d (1 - radius / |d|)`` and
+    ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
+    the direction ``u`` of the offset follows: ``radius + sigmas /
+    sqrt(u^T C^-1 u)``, so that the gate is ``|d| < that radius``; with
+    ``C = 0`` it is ``radius``. A NaN covariance (no answer) is never in
+    reach, its radius NaN. Returns (in reach (K,) bool, radius (K,) m).
+    """
+    offset = np.asarray(centres, float).reshape(-1, 3) - np.asarray(position, float)
+    distance = np.linalg.norm(offset, axis=1)
+    direction = offset / np.maximum(distance, 1e-12)[:, None]
+    covariances = np.asarray(covariances, float).reshape(-1, 3, 3)
+    known = np.isfinite(covariances).all(axis=(1, 2))
+    floor = 1e-12 * np.eye(3)  # a node at the anchor has no uncertainty at all
+    inverse = np.linalg.inv(np.where(known[:, None, None], covariances, np.eye(3)) + floor)
+    spread = 1.0 / np.sqrt(np.einsum("ki,kij,kj->k", direction, inverse, direction))
+    reach = np.where(known, np.asarray(radius, float) + sigmas * spread, np.nan)
+    return known & (distance < np.nan_to_num(reach, nan=-1.0)), reach

@@ -158,7 +158,7 @@ def on_overlap(
     It stops when the part kept is one it kept before (a fixed point, or two near-equal answers in turn as
     a few boundary points go in and out) or after ``rounds`` registrations. ``cap``: ICP iterations a round."""
     outline = footprint(fixed)
-    target = icp.ready(fixed) if icp.metric != "point-to-point" else fixed  # as IcpService.__call__ registers
+    target = icp.target(fixed)
     T, fit, seen = np.asarray(T_fixed_moving, dtype=np.float64), None, set()
     for _ in range(rounds):
         keep = inside(outline, transform_points(moving, T), 0.0)

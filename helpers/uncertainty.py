@@ -7,7 +7,7 @@ and the loop edges, each with its noise (:func:`edge_information`). It
 answers two questions: where the graph puts an old node ``c`` relative to the
 current one (the odometry's offset, moved by the loop edges found), and how
 uncertain that offset is (its covariance). A loop query turns them into a
-gate (:func:`mahalanobis_gate`): an old submap is searched when its centre
+gate (:func:`helpers.loopsearch.mahalanobis_gate`): an old submap is searched when its centre
 could, within ``search_sigmas`` sigmas, lie within the fixed search radius
 of the scan. With no uncertainty the gate is the reference's fixed radius;
 drift widens it only where the graph says drift can be, and a loop shrinks
@@ -372,30 +372,3 @@ def _matrices(values: gtsam.Values) -> np.ndarray:
 def _rotation_first(information: np.ndarray) -> np.ndarray:
     order = np.array([3, 4, 5, 0, 1, 2])
     return information[np.ix_(order, order)]
-
-
-def mahalanobis_gate(
-    centres: np.ndarray, position: np.ndarray, covariances: np.ndarray, radius, sigmas: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Which old places the scan at ``position`` may truly be over, and the
-    search radius around each.
-
-    Place ``k`` (its centre, map frame) is in reach when the offset to it,
-    less ``radius`` (the place's extent, m; one number or one per place), is within
-    ``sigmas`` of its uncertainty: ``d' = d (1 - radius / |d|)`` and
-    ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
-    the direction ``u`` of the offset follows: ``radius + sigmas /
-    sqrt(u^T C^-1 u)``, so that the gate is ``|d| < that radius``; with
-    ``C = 0`` it is ``radius``. A NaN covariance (no answer) is never in
-    reach, its radius NaN. Returns (in reach (K,) bool, radius (K,) m).
-    """
-    offset = np.asarray(centres, float).reshape(-1, 3) - np.asarray(position, float)
-    distance = np.linalg.norm(offset, axis=1)
-    direction = offset / np.maximum(distance, 1e-12)[:, None]
-    covariances = np.asarray(covariances, float).reshape(-1, 3, 3)
-    known = np.isfinite(covariances).all(axis=(1, 2))
-    floor = 1e-12 * np.eye(3)  # a node at the anchor has no uncertainty at all
-    inverse = np.linalg.inv(np.where(known[:, None, None], covariances, np.eye(3)) + floor)
-    spread = 1.0 / np.sqrt(np.einsum("ki,kij,kj->k", direction, inverse, direction))
-    reach = np.where(known, np.asarray(radius, float) + sigmas * spread, np.nan)
-    return known & (distance < np.nan_to_num(reach, nan=-1.0)), reach

@@ -1,4 +1,4 @@
-"""The README's configuration table says what the code says."""
+"""The README's configuration table and its layout say what the code says."""
 
 import re
 import tomllib
@@ -38,3 +38,17 @@ def test_the_reference_config_file_is_the_reference_workflow():
     assert block, "the README shows no TOML block"
     assert tomllib.loads(block.group(1)) == REFERENCE_WORKFLOW
     assert Config.reference() == Config().with_values(**REFERENCE_WORKFLOW)
+
+
+def test_the_layout_names_every_module_of_the_package():
+    """Each module of ``helpers/`` (its subpackages named as folders) appears in the README's layout, and
+    every ``.py`` name the layout gives under ``helpers/`` is a module there."""
+    layout = re.search(r"## Layout\n\n```\n(helpers/.*?)\n(?:notebooks/)", README.read_text(), re.S)
+    assert layout, "the README has no layout block starting at helpers/"
+    named = set(re.findall(r"\b(\w+\.py)\b", layout.group(1)))
+    package = README.parent / "helpers"
+    modules = {path.name for path in package.glob("*.py")} - {"__init__.py"}
+    folders = {path.name for path in package.iterdir() if (path / "__init__.py").exists()}
+    assert modules <= named, f"modules the layout leaves out: {sorted(modules - named)}"
+    assert named - {"figures.py", "plots.py"} <= modules, f"the layout names no such module: {sorted(named - modules)}"
+    assert {f"{folder}/" for folder in folders} <= set(re.findall(r"^  (\w+/)", layout.group(1), re.M))

@@ -8,7 +8,8 @@ from scipy.spatial.transform import Rotation
 from helpers.config import PoseGraphConfig
 from helpers.errors import SlamError
 from helpers.factors import Edge
-from helpers.uncertainty import RelativeUncertainty, adjoint, edge_information, mahalanobis_gate
+from helpers.loopsearch import mahalanobis_gate
+from helpers.uncertainty import RelativeUncertainty, adjoint, edge_information
 
 SIGMA_M = 0.1
 

@@ -13,9 +13,9 @@ import numpy as np
 from ..errors import SlamError
 from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M, is_false_loop, loop_error
 from ..factors import Edge
-from ..loopsearch import distance_flown_since, radius_after
+from ..loopsearch import distance_flown_since, mahalanobis_gate, radius_after
 from ..submaps import centre_scan_id
-from ..uncertainty import RelativeUncertainty, mahalanobis_gate
+from ..uncertainty import RelativeUncertainty
 from . import report, unanswered
 
 
@@ -43,7 +43,7 @@ def _gate_radius(result, node: int, submap_id: int) -> float:
     """The search radius (m) around submap ``submap_id`` for the query of
     ``node`` under the run's search: with ``search = "growth"``,
     :func:`helpers.loopsearch.radius_after` the path flown since the submap;
-    with ``"uncertainty"``, the gate of :func:`helpers.uncertainty.mahalanobis_gate`
+    with ``"uncertainty"``, the gate of :func:`helpers.loopsearch.mahalanobis_gate`
     with the exact covariance (``gtsam.Marginals``) of the graph of
     :func:`search_graph` held at ``node``. The run itself may reuse a
     covariance computed a few nodes earlier, which errs on the wide side, so
