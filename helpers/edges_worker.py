@@ -6,7 +6,7 @@ help) and nothing in a node's odometry waits for them: only the next loop
 query reads them, through the loop closer's uncertainty graph. So while the
 main process registers node j + 1, this process registers node j onto the
 scans before it, and :class:`BackgroundEdges` hands node j's edges over just
-before node j + 1's loop query, where :class:`helpers.slam.EdgesBack` in
+before node j + 1's loop query, where :class:`EdgesBack` in
 the main process would have added them. The same code on the same points
 and steps in the same order gives the same edges to the bit, so a run is
 the same run either way; only the time changes.
@@ -27,14 +27,72 @@ import pickle
 import subprocess
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .factors import Edge
+
+if TYPE_CHECKING:
+    from .icp_service import IcpService
 
 log = logging.getLogger(__name__)
 
 STARTUP_NODES = 50  # a run of fewer nodes registers in place: starting the process (imports) costs about a second
 
 
+class EdgesBack:
+    """Registers every node to the nodes 2 .. ``edges_back`` before it, from
+    the chained odometry as the guess. Each extra edge measures the motion
+    again with other points, so the pose graph can average the odometry's
+    random errors instead of summing them. Registrations scored above
+    ``rmse_threshold`` (surface RMSE) are left out.
+
+    ICP starts close and stops after ``max_iterations``: some edges never
+    meet the tolerance but oscillate by millimetres until any cap, and a low
+    cap gives the same trajectory sooner (notebook 6 and the benchmarks
+    measure it)."""
+
+    def __init__(self, icp: IcpService, *, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
+        self.icp, self.edges_back, self.max_iterations = icp, edges_back, max_iterations
+        self.rmse_threshold = rmse_threshold
+        self.edges: list[Edge] = []
+        self.tried = 0
+
+    @classmethod
+    def from_config(cls, icp: IcpService, graph) -> EdgesBack:
+        """The edges back of ``[pose_graph]`` (``graph``), registered by ``icp``."""
+        return cls(
+            icp,
+            edges_back=graph.edges_back,
+            max_iterations=graph.edges_back_icp_max_iterations,
+            rmse_threshold=graph.edges_back_rmse_threshold,
+        )
+
+    def add(self, j: int, clouds, relative) -> list[Edge]:
+        """The edges back of node ``j`` (``clouds[k]``: node k's cloud, ``relative[k]``: the odometry
+        step from node k to k + 1; lists, or dicts of the nodes within reach)."""
+        kept = []
+        for back in range(2, min(self.edges_back, j) + 1):
+            guess = np.linalg.multi_dot([np.eye(4), *(relative[k] for k in range(j - back, j))])
+            fit = self.icp(
+                moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
+            )
+            (T_i_j, rmse), self.tried = fit, self.tried + 1
+            if rmse < self.rmse_threshold:
+                kept.append(Edge(j - back, j, T_i_j, rmse, information=fit.information))
+            else:
+                log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
+        self.edges.extend(kept)
+        return kept
+
+    def sorted(self) -> list[Edge]:
+        """Every kept edge, ordered by span, then by node."""
+        return sorted(self.edges, key=lambda e: (e.j - e.i, e.j))
+
+
 class BackgroundEdges:
-    """:class:`helpers.slam.EdgesBack` (``local``) run in a helper process: :meth:`submit` node j's scan
+    """:class:`EdgesBack` (``local``) run in a helper process: :meth:`submit` node j's scan
     and steps, :meth:`collect` its kept edges at the next node. ``edges``, ``tried`` and :meth:`sorted`
     are ``local``'s, which also registers any node the process could not."""
 
@@ -122,7 +180,6 @@ def serve(requests, answers) -> None:
     """Answer ``("node", j, cloud, steps)`` requests with ``("edges", kept, tried)`` (or ``("error", exception,
     0)``) until the main process closes the pipe; ``("start", config)`` comes first."""
     from .icp_service import IcpService
-    from .slam import EdgesBack
 
     clouds, steps, edges = {}, {}, None
     while True:

@@ -63,3 +63,22 @@ def relative_pose_error(true_relative: np.ndarray, estimated_relative: np.ndarra
     rotation angle (deg). Takes (4, 4) or (K, 4, 4) arrays; returns scalars or (K,) arrays."""
     error = np.linalg.inv(true_relative) @ estimated_relative
     return np.linalg.norm(error[..., :3, 3], axis=-1), rotation_angle_deg(error)
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the cross-product matrices ``[v]x`` of (..., 3) vectors: ``[v]x @ w = v x w``."""
+    v = np.asarray(v, dtype=np.float64)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    out[..., 0, 1], out[..., 0, 2], out[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    out[..., 1, 0], out[..., 2, 0], out[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    return out
+
+
+def adjoint(T: np.ndarray) -> np.ndarray:
+    """GTSAM's adjoint of the (..., 4, 4) poses ``T``, rotation first: ``[[R, 0], [[t]x R, R]]``; it carries
+    a tangent six-vector (a perturbation) from the frame after ``T`` to the frame before it."""
+    R = T[..., :3, :3]
+    out = np.zeros(T.shape[:-2] + (6, 6))
+    out[..., :3, :3] = out[..., 3:, 3:] = R
+    out[..., 3:, :3] = skew(T[..., :3, 3]) @ R
+    return out

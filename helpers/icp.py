@@ -23,7 +23,7 @@ import small_gicp
 from .config import ICP_BACKENDS, METRICS
 from .errors import SlamError
 from .features import to_cloud
-from .geometry import check_points
+from .geometry import check_points, skew
 from .information import hessian_information, plane_information
 from .pose_graph_config import INFORMATION_SOURCES
 from .registration import SAMPLE_SIZE
@@ -145,12 +145,10 @@ def gicp_covariances(normals: np.ndarray, epsilon: float = GICP_EPSILON) -> np.n
     n = np.asarray(normals, dtype=np.float64)
     c = n[:, 0]
     v = np.column_stack([np.zeros(len(n)), -n[:, 2], n[:, 1]])  # e1 x n
-    skew = np.zeros((len(n), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -v[:, 2], v[:, 1], -v[:, 0]
-    skew[:, 1, 0], skew[:, 2, 0], skew[:, 2, 1] = v[:, 2], -v[:, 1], v[:, 0]
+    cross = skew(v)
     flip = c < -0.99
     factor = np.where(flip, 0.0, 1.0 / np.where(flip, 1.0, 1.0 + c))
-    rot = np.eye(3) + skew + (skew @ skew) * factor[:, None, None]
+    rot = np.eye(3) + cross + (cross @ cross) * factor[:, None, None]
     rot[flip] = np.eye(3)
     return (rot * np.array([epsilon, 1.0, 1.0])) @ np.swapaxes(rot, 1, 2)
 

@@ -85,8 +85,7 @@ def inside(outline: np.ndarray | None, points: np.ndarray, margin: float) -> np.
 def overlap(moving: np.ndarray, fixed: np.ndarray, T_fixed_moving: np.ndarray, margin: float) -> np.ndarray:
     """(N,) bool: the ``moving`` points (N, 3) that ``T_fixed_moving`` places inside the footprint of
     ``fixed`` (M, 3), shrunk by ``margin`` metres."""
-    T = np.asarray(T_fixed_moving, dtype=np.float64)
-    moved = np.asarray(moving, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+    moved = transform_points(np.asarray(moving, dtype=np.float64), np.asarray(T_fixed_moving, dtype=np.float64))
     return inside(footprint(fixed), moved, margin)
 
 

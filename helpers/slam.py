@@ -3,7 +3,8 @@
 :class:`Slam` runs each accepted scan through the stages in turn: the
 odometry registers it onto the previous accepted scan, the loop closer adds
 it to the current submap and queries the old submaps for a loop, and the
-scan is registered to the few scans before it (edges back). Every stage
+scan is registered to the few scans before it (edges back,
+:class:`helpers.edges_worker.EdgesBack`). Every stage
 works on the same downsampled scan, made ready for ICP once by the run's
 one :class:`helpers.icp_service.IcpService`. :meth:`Slam.result` then
 optimises the pose graph and rebuilds the map::
@@ -27,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .config import Config
-from .edges_worker import BackgroundEdges
+from .edges_worker import BackgroundEdges, EdgesBack
 from .errors import SlamError
 from .factors import Edge, edge_information, motion_factors
 from .features import grid_average
@@ -106,56 +107,6 @@ class SlamResult:
     @property
     def poses_optimized(self) -> np.ndarray:
         return self.graph.poses
-
-
-class EdgesBack:
-    """Registers every node to the nodes 2 .. ``edges_back`` before it, from
-    the chained odometry as the guess. Each extra edge measures the motion
-    again with other points, so the pose graph can average the odometry's
-    random errors instead of summing them. Registrations scored above
-    ``rmse_threshold`` (surface RMSE) are left out.
-
-    ICP starts close and stops after ``max_iterations``: some edges never
-    meet the tolerance but oscillate by millimetres until any cap, and a low
-    cap gives the same trajectory sooner (notebook 6 and the benchmarks
-    measure it)."""
-
-    def __init__(self, icp: IcpService, *, edges_back: int, max_iterations: int, rmse_threshold: float) -> None:
-        self.icp, self.edges_back, self.max_iterations = icp, edges_back, max_iterations
-        self.rmse_threshold = rmse_threshold
-        self.edges: list[Edge] = []
-        self.tried = 0
-
-    @classmethod
-    def from_config(cls, icp: IcpService, graph) -> EdgesBack:
-        """The edges back of ``[pose_graph]`` (``graph``), registered by ``icp``."""
-        return cls(
-            icp,
-            edges_back=graph.edges_back,
-            max_iterations=graph.edges_back_icp_max_iterations,
-            rmse_threshold=graph.edges_back_rmse_threshold,
-        )
-
-    def add(self, j: int, clouds, relative) -> list[Edge]:
-        """The edges back of node ``j`` (``clouds[k]``: node k's cloud, ``relative[k]``: the odometry
-        step from node k to k + 1; lists, or dicts of the nodes within reach)."""
-        kept = []
-        for back in range(2, min(self.edges_back, j) + 1):
-            guess = np.linalg.multi_dot([np.eye(4), *(relative[k] for k in range(j - back, j))])
-            fit = self.icp(
-                moving=clouds[j], fixed=clouds[j - back], T_fixed_moving=guess, max_iterations=self.max_iterations
-            )
-            (T_i_j, rmse), self.tried = fit, self.tried + 1
-            if rmse < self.rmse_threshold:
-                kept.append(Edge(j - back, j, T_i_j, rmse, information=fit.information))
-            else:
-                log.info("edge %d -> %d left out: surface RMSE %.2f m", j - back, j, rmse)
-        self.edges.extend(kept)
-        return kept
-
-    def sorted(self) -> list[Edge]:
-        """Every kept edge, ordered by span, then by node."""
-        return sorted(self.edges, key=lambda e: (e.j - e.i, e.j))
 
 
 class Slam:

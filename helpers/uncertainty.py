@@ -69,24 +69,13 @@ import numpy as np
 from .config import PoseGraphConfig
 from .errors import SlamError
 from .factors import Edge, edge_information, gaussian, pose3
+from .geometry import adjoint
 
 REFRESH_NODES = 12  # recompute the marginals once the chain since the last computation holds this many nodes
 WINDOW_NODES = 800  # the nodes a computation holds at most: the anchor's neighbourhood along the graph's edges
 ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any edge, still well conditioned
 MIN_FIXES = 3  # GNSS fixes a window must hold before they, not the anchor's odometry pose, place it
 LOOSE_SIGMAS = np.array([1.0, 1.0, 1.0, 1e4, 1e4, 1e4])  # rad, m: a prior that only settles what fixes in a line leave
-
-
-def adjoint(T: np.ndarray) -> np.ndarray:
-    """GTSAM's adjoint of ``T`` (..., 4, 4), rotation first: ``[[R, 0], [t^ R, R]]``."""
-    R, t = T[..., :3, :3], T[..., :3, 3]
-    skew = np.zeros(t.shape[:-1] + (3, 3))
-    skew[..., 0, 1], skew[..., 0, 2], skew[..., 1, 2] = -t[..., 2], t[..., 1], -t[..., 0]
-    skew = skew - np.swapaxes(skew, -1, -2)
-    out = np.zeros(T.shape[:-2] + (6, 6))
-    out[..., :3, :3] = out[..., 3:, 3:] = R
-    out[..., 3:, :3] = skew @ R
-    return out
 
 
 class RelativeUncertainty:

@@ -8,8 +8,9 @@ from scipy.spatial.transform import Rotation
 from helpers.config import PoseGraphConfig
 from helpers.errors import SlamError
 from helpers.factors import Edge
+from helpers.geometry import adjoint
 from helpers.loopsearch import mahalanobis_gate
-from helpers.uncertainty import RelativeUncertainty, adjoint, edge_information
+from helpers.uncertainty import RelativeUncertainty, edge_information
 
 SIGMA_M = 0.1
 
