@@ -14,7 +14,8 @@ SYSDEPS := libusb-1.0-0:libusb-1.0.so.0 libosmesa6:libOSMesa.so.8
 
 # OpenMP threads (Open3D, small_gicp) spin after each parallel call and starve numpy's unless told to
 # sleep; it must be set before Open3D loads, so here rather than in the package (13 % faster registration).
-export OMP_WAIT_POLICY ?= PASSIVE
+# Lower case: libgomp compares it in the user's locale, and in Turkish "PASSIVE" does not read as passive.
+export OMP_WAIT_POLICY ?= passive
 
 # The suite runs in TEST_WORKERS processes (pytest-xdist), each test file whole in one of them: a notebook's
 # cells share one kernel, a module's fixtures are built once. Most tests hold one core, so two workers on two
@@ -46,7 +47,7 @@ setup: $(STAMP)
 # data/: the default flight in the reference's file formats (aerialMap.tar.gz, gTruthWayPoints.mat), written
 # by the package; tests/test_datafiles.py fails when the committed files and the package disagree.
 data: $(STAMP)
-	$(PY) -m helpers.datafiles data
+	$(PY) -m helpers.sim.reference_files data
 
 $(STAMP): environment.txt pyproject.toml | sysdeps
 	@command -v $(PYTHON) >/dev/null || { echo "error: $(PYTHON) not found; install Python 3.11 (Debian: apt-get install python3.11 python3.11-venv)" >&2; exit 1; }

@@ -5,7 +5,7 @@
 Once old submaps match, the reference registers the current scan by ICP
 onto every scan of them and keeps the lowest RMSE; ours (``[loop_closure]
 best_scan_stop``) registers them best fitting first and stops at one under
-that share of ``rmse_threshold`` (:func:`helpers.loopclosure.best_scan_registration`).
+that share of ``rmse_threshold`` (:func:`helpers.slam.loops.closer.best_scan_registration`).
 Each flight runs once with the shipped search, in a fresh process. At every
 query this script also runs the reference's search (the same function with
 ``best_scan_stop = 0``), to see what it would have chosen from the same
@@ -38,10 +38,10 @@ import dataclasses, json, sys, tempfile
 import numpy as np
 sys.path.insert(0, sys.argv[2])
 import helpers
-import helpers.loopclosure as lc
-from helpers.config import Config
-from helpers.evaluation import run_metrics
-from helpers.pipeline import run_slam
+import helpers.slam.loops.closer as lc
+from helpers.config.tables import Config
+from helpers.quality.evaluation import run_metrics
+from helpers.slam.pipeline import run_slam
 
 name, queries = sys.argv[1], []
 search = lc.best_scan_registration

@@ -5,9 +5,9 @@
         [--pairs N]
 
 Each flight is a stretch of a loop; its parameters are fitted to it as ``run``
-fits them (:func:`helpers.fitting.fit_to_flight`). Consecutive accepted scans
-are registered by the odometry's own code (:func:`helpers.odometry.register_frames`,
-with the overlap crop of :mod:`helpers.overlap` when the configuration has it,
+fits them (:func:`helpers.slam.flight_fit.fit_to_flight`). Consecutive accepted scans
+are registered by the odometry's own code (:func:`helpers.slam.odometry.register_frames`,
+with the overlap crop of :mod:`helpers.slam.registration.overlap` when the configuration has it,
 as it has by default) and, for every pair, the estimated translation is
 compared with the true one in the fixed scan's true sensor frame (x along the
 track, y across, z up). The ratio ``along`` is the estimate's component along
@@ -43,7 +43,7 @@ import dataclasses
 import os
 import time
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 import numpy as np
@@ -53,16 +53,16 @@ from scipy.ndimage import gaussian_filter
 from scipy.spatial import Delaunay
 
 from helpers import SensorConfig, default_scene, read_waypoints
-from helpers.config import Config
-from helpers.dataset import DEFAULT_WAYPOINTS, MAP_CELL, Dataset, LazyScans, fitted_loop
-from helpers.features import grid_average
-from helpers.fitting import fit_to_flight, flight_of
-from helpers.frames import track_frames
-from helpers.icp import GICP_EPSILON, gicp_covariances, icp_cloud
-from helpers.mapio import IDENTITY_FRAME, height_field_from_points, read_map
-from helpers.odometry import Frame, describe, register_frames
-from helpers.scene import HeightField
-from helpers.sensor import Surface, poses_from_waypoints
+from helpers.config.tables import Config
+from helpers.sim.dataset import DEFAULT_WAYPOINTS, MAP_CELL, Dataset, LazyScans, fitted_loop
+from helpers.sim.maps import IDENTITY_FRAME, height_field_from_points, read_map
+from helpers.sim.scene import HeightField
+from helpers.sim.sensor import Surface, poses_from_waypoints
+from helpers.slam.flight_fit import fit_to_flight, flight_of
+from helpers.slam.odometry import Frame, describe, register_frames
+from helpers.slam.registration.features import grid_average
+from helpers.slam.registration.icp import GICP_EPSILON, gicp_covariances, icp_cloud
+from helpers.slam.registration.pair import track_frames
 
 AUTZEN = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "autzen_trim.laz")
 CHAIN = 10  # steps chained for the ``chain`` stage
@@ -145,7 +145,7 @@ def flight(name: str, pairs: int, skip: int | None = None, variant: str | None =
 
 
 def frame(scan: np.ndarray, pose: np.ndarray, config: Config, grid: str = "own", epsilon=None, steep=None) -> Frame:
-    """A scan prepared as :func:`helpers.odometry.prepare` does, with its grid chosen by ``grid``:
+    """A scan prepared as :func:`helpers.slam.odometry.prepare` does, with its grid chosen by ``grid``:
     ``own`` (the package: cells of the scan's own frame), ``world`` (cells of the map frame, through the
     true pose), ``fine`` (both grids halved), ``raw`` (ICP on every point). ``epsilon``: Open3D's
     generalized-ICP covariances made this thin across their plane (the package's: ``GICP_EPSILON``).
@@ -185,7 +185,7 @@ def resampled(scan: Frame, config: Config) -> Frame:
 
 def measure(data: Dataset, config: Config, grid="own", starts=("coarse",), epsilon=None, steep=None, rowless=False):
     """Relative transforms per stage, (pairs, 4, 4) each, and the true ones (``truth``). ``icp`` is the
-    odometry's own registration (:func:`helpers.odometry.register_frames`, with the overlap crop when
+    odometry's own registration (:func:`helpers.slam.odometry.register_frames`, with the overlap crop when
     ``[registration] overlap_crop`` is on); ``icp<truth`` and ``icp<identity`` the same ICP from those starts.
     ``rowless``: every fixed scan's ICP cloud :func:`resampled` without its ray rows."""
     indices = np.arange(0, len(data.poses), config.registration.skip_frames)

@@ -1,5 +1,5 @@
 """The coarse fit measured: the package's six-degree-of-freedom MSAC against
-the four-degree-of-freedom one (yaw + translation, ``helpers.fit4dof``) on
+the four-degree-of-freedom one (yaw + translation, ``helpers.slam.registration.msac_yaw``) on
 the same matches of the same scan pairs, then both refined by the package's ICP.
 
     OMP_NUM_THREADS=1 .venv/bin/python benchmarks/bench_coarse_fit.py [--pairs 30] [--flights default,low,autzen]
@@ -7,7 +7,7 @@ the same matches of the same scan pairs, then both refined by the package's ICP.
 Flights: ``default`` (the default scene at 700 m, the reference's values),
 ``low`` (the default scene 150 m above its ground) and ``autzen150`` /
 ``autzen250`` (the real tile beside the repository, 150 and 250 m above its
-ground); the low flights take the values ``helpers.fitting`` fits to them, as
+ground); the low flights take the values ``helpers.slam.flight_fit`` fits to them, as
 ``run`` does. Each pair is two consecutive accepted scans (``skip_frames``
 apart; ``--apart N``: N accepted scans apart, less overlap, as a loop
 candidate or a missed scan gives), the pairs spread evenly over the flight. Descriptors and matches
@@ -30,21 +30,21 @@ from pathlib import Path
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # single-thread CPU times
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-import helpers.registration as registration
+import helpers.slam.registration.msac as registration
 from helpers import create_dataset
-from helpers.config import Config, SensorConfig
+from helpers.config.tables import Config, SensorConfig
 from helpers.errors import SlamError
-from helpers.fit4dof import fit_yaw, fit_yaw_translation, yaw_transform
-from helpers.fitting import fit_to_flight, flight_of
-from helpers.icp import refine_icp
-from helpers.matching import match_features
-from helpers.odometry import describe, prepare
-from helpers.registration import trials_needed
+from helpers.slam.flight_fit import fit_to_flight, flight_of
+from helpers.slam.odometry import describe, prepare
+from helpers.slam.registration.icp import refine_icp
+from helpers.slam.registration.matching import match_features
+from helpers.slam.registration.msac import trials_needed
+from helpers.slam.registration.msac_yaw import fit_yaw, fit_yaw_translation, yaw_transform
 
 AUTZEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "autzen_trim.laz"
 LOW_HEIGHTS = {"low": 150.0, "autzen150": 150.0, "autzen250": 250.0}  # m above the ground

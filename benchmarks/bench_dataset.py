@@ -10,9 +10,9 @@ import time
 import numpy as np
 
 import helpers
-from helpers.config import SensorConfig
-from helpers.dataset import _default_surface
-from helpers.sensor import Surface, cast_scans, poses_from_waypoints, ray_pattern
+from helpers.config.tables import SensorConfig
+from helpers.sim.dataset import _default_surface
+from helpers.sim.sensor import Surface, cast_scans, poses_from_waypoints, ray_pattern
 
 REPEATS = 3
 

@@ -5,7 +5,7 @@
         [--save flights.jsonl]
 
 Each flight is run as ``python -m helpers run`` runs it (parameters fitted to
-the flight by :func:`helpers.fitting.fit_to_flight`), in a fresh process of
+the flight by :func:`helpers.slam.flight_fit.fit_to_flight`), in a fresh process of
 its own, and graded against the simulator's poses:
 
 * ``default``: the shipped default (the reference's flight, 700 m);
@@ -21,10 +21,10 @@ value after fitting (repeatable; ``table.key*=factor`` multiplies the fitted val
 ``--seeds`` flies each flight once per lidar noise seed (``[sensor] seed``; the
 low flights move by tens of percent from one seed to the next, so compare
 variants on several); ``--gnss SIGMA`` adds a simulated GNSS fix at every scan
-(``helpers.gnss.simulate_gnss``, sigma SIGMA m on each axis) to the pose graph.
+(``helpers.sim.gnss.simulate_gnss``, sigma SIGMA m on each axis) to the pose graph.
 The table prints ATE (odometry -> optimised), the ATE the run's graph expects of
-itself (``exp m``: :func:`helpers.graph_measures.expected_ate`, from its marginals; the
-trust flag asks it only where loops may hold a drifting odometry, :mod:`helpers.health`),
+itself (``exp m``: :func:`helpers.quality.graph_checks.expected_ate`, from its marginals; the
+trust flag asks it only where loops may hold a drifting odometry, :mod:`helpers.quality.trust`),
 the one-step RPE, the mean ratio of estimated to true step length, loops (false), the
 steps whose gated match was redone without the gate (``[features] match_gate``), whether
 the run calls itself trusted, and the first words of each problem named. ``--save FILE``
@@ -50,14 +50,14 @@ import json, resource, sys, time
 import numpy as np
 sys.path.insert(0, sys.argv[2])
 from bench_flights import build_flight
-from helpers.evaluation import map_errors, run_metrics
-from helpers.graph_measures import expected_ate
-from helpers.pipeline import run_slam
+from helpers.quality.evaluation import map_errors, run_metrics
+from helpers.quality.graph_checks import expected_ate
+from helpers.slam.pipeline import run_slam
 options = json.loads(sys.argv[1])
 data, config = build_flight(options)
 gnss = None
 if options["gnss"]:  # a fix at every scan, the simulator's noise (seeded by the lidar noise seed), its sigma told
-    from helpers.gnss import GnssFixes, simulate_gnss
+    from helpers.sim.gnss import GnssFixes, simulate_gnss
     sigma = options["gnss"]
     fixes = simulate_gnss(data.poses[:, :3, 3], sigma, sigma, options["seed"])
     gnss = GnssFixes(np.arange(len(data)), fixes, np.full(3, sigma))
@@ -95,12 +95,12 @@ def build_flight(options: dict):
     import numpy as np
 
     from helpers import SensorConfig, default_scene, read_waypoints
-    from helpers.config import Config
-    from helpers.dataset import DEFAULT_WAYPOINTS, MAP_CELL, Dataset, LazyScans, fitted_loop
-    from helpers.fitting import fit_to_flight, flight_of
-    from helpers.mapio import IDENTITY_FRAME, height_field_from_points, read_map
-    from helpers.sensor import Surface, poses_from_waypoints
-    from helpers.tiles import sparse_tile
+    from helpers.config.tables import Config
+    from helpers.sim.dataset import DEFAULT_WAYPOINTS, MAP_CELL, Dataset, LazyScans, fitted_loop
+    from helpers.sim.maps import IDENTITY_FRAME, height_field_from_points, read_map
+    from helpers.sim.sensor import Surface, poses_from_waypoints
+    from helpers.sim.tiles import sparse_tile
+    from helpers.slam.flight_fit import fit_to_flight, flight_of
 
     name, laps = options["name"], options["laps"]
     if name == "default":
@@ -214,14 +214,14 @@ def main() -> None:
         "--save", type=Path, default=None, metavar="FILE", help="append each flight's figures to FILE (JSON lines)"
     )
     args = parser.parse_args()
-    from helpers.config import Config
+    from helpers.config.tables import Config
     from helpers.errors import SlamError
 
     try:  # a misspelt --set fails here, once, not in every flight's process
         with_settings(Config(), args.set)
     except (AttributeError, TypeError, ValueError, SlamError) as error:
         sys.exit(f"error: --set {' '.join(args.set)}: {error}")
-    env = {**os.environ, "OMP_WAIT_POLICY": "PASSIVE"}
+    env = {**os.environ, "OMP_WAIT_POLICY": "passive"}
     print(f"{'flight':12} {'scans':>5} {'nodes':>5} {'ATE m':>13} {'exp m':>6} {'RPE m':>6} {'step':>6} {'loops':>8} "
           f"{'ungated':>7} {'map m':>6} {'trusted':>7} {'s':>6} {'GiB':>5}  problems")  # fmt: skip
     for name, seed in [(name, seed) for name in args.flights for seed in args.seeds]:

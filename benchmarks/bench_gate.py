@@ -22,16 +22,16 @@ import time
 
 import numpy as np
 
-from helpers.config import Config
-from helpers.dataset import create_dataset
-from helpers.frames import gate
-from helpers.matching import _neighbourhoods, match_features
-from helpers.preparation import prepare
+from helpers.config.tables import Config
+from helpers.sim.dataset import create_dataset
+from helpers.slam.preprocess import prepare
+from helpers.slam.registration.matching import _neighbourhoods, match_features
+from helpers.slam.registration.pair import gate
 
 
 def compared_share(moving_xy: np.ndarray, fixed_xy: np.ndarray, cell: float) -> float:
     """Mean share of the fixed points a moving point is compared with: the matcher's own tiles
-    (``helpers.matching._neighbourhoods``), each a cell's moving points against its 3 x 3 cells' fixed ones."""
+    (``matching._neighbourhoods``), each a cell's moving points against its 3 x 3 cells' fixed ones."""
     tiles = _neighbourhoods(moving_xy, fixed_xy, cell)
     return sum(len(rows) * len(columns) for rows, columns in tiles) / (len(moving_xy) * len(fixed_xy))
 

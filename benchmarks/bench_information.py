@@ -10,7 +10,7 @@ the truth, ``xi = Log(inv(T_true) @ T_est)`` (translation first, in the moving
 scan's frame, the information's convention), is whitened by its information
 after calibration (``[pose_graph] information_scale`` and the floor of
 ``min_sigma_m`` / ``min_sigma_deg``; an edge back's then divided by its span,
-as :func:`helpers.slam.build_pose_graph` weighs it). Calibrated, ``xi^T I xi`` follows a
+as :func:`helpers.slam.slam.build_pose_graph` weighs it). Calibrated, ``xi^T I xi`` follows a
 chi-square law with 6 degrees of freedom: per degree of freedom its median is
 0.89 and its mean 1, and the error along each principal direction of the
 covariance, in sigmas, has an RMS of 1. ``weak`` is that RMS along the
@@ -33,7 +33,7 @@ import pickle
 import sys
 import time
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, os.path.dirname(__file__))
 
@@ -41,12 +41,12 @@ import gtsam
 import numpy as np
 from bench_bias import flight
 
-from helpers.factors import pose3
-from helpers.information import TRANSLATION_FIRST, calibrated
-from helpers.metrics import ate
-from helpers.pipeline import run_slam
-from helpers.pose_graph_config import INFORMATION_SOURCES
-from helpers.slam import build_pose_graph
+from helpers.config.pose_graph import INFORMATION_SOURCES
+from helpers.quality.metrics import ate
+from helpers.slam.graph.factors import pose3
+from helpers.slam.graph.information import SWAP_ROTATION_TRANSLATION, calibrated
+from helpers.slam.pipeline import run_slam
+from helpers.slam.slam import build_pose_graph
 
 # label: (bench_bias flight, surface variant)
 FLIGHTS = {
@@ -62,7 +62,7 @@ CHI2_6_MEDIAN = 5.348  # median of a chi-square with 6 degrees of freedom
 
 def error_of(truth: np.ndarray, estimate: np.ndarray) -> np.ndarray:
     """``Log(inv(truth) @ estimate)``, translation first (m, rad)."""
-    return np.asarray(gtsam.Pose3.Logmap(pose3(np.linalg.inv(truth) @ estimate)))[TRANSLATION_FIRST]
+    return np.asarray(gtsam.Pose3.Logmap(pose3(np.linalg.inv(truth) @ estimate)))[SWAP_ROTATION_TRANSLATION]
 
 
 def measure(label: str, pairs: int, information: str = "gicp") -> dict:

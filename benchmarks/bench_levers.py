@@ -16,8 +16,8 @@ Each lever runs the odometry of the default flight's first ``--scans`` accepted 
 once per ``--blas`` thread count (``OPENBLAS_NUM_THREADS`` of that process: numpy's BLAS, which the
 robust fit uses; the descriptor matcher holds it to one thread itself, ``helpers.threads.BLAS``, so
 the count no longer reaches the matching column). Open3D and small_gicp run on ``OMP_NUM_THREADS`` (1
-unless set). Stage times are process CPU times (every thread's), taken where :mod:`helpers.preparation`
-and :mod:`helpers.frames` take their wall times, so a busy machine slows them less than wall times; the
+unless set). Stage times are process CPU times (every thread's), taken where :mod:`helpers.slam.preprocess`
+and :mod:`helpers.slam.registration.pair` take their wall times, so a busy machine slows them less than wall times; the
 wall time per scan is printed beside them.
 
 Per lever: CPU ms per accepted scan (mean) of FPFH (normals and descriptors), matching, the robust fit and
@@ -53,12 +53,12 @@ def child(options: dict) -> dict:
     import numpy as np
     from bench_flights import with_settings
 
-    import helpers.frames as frames
-    import helpers.preparation as preparation
+    import helpers.slam.preprocess as preparation
+    import helpers.slam.registration.pair as frames
     from helpers import create_dataset
-    from helpers.config import Config
-    from helpers.metrics import ate, rpe
-    from helpers.odometry import STAGES, Odometry, accepted_indices, prepare
+    from helpers.config.tables import Config
+    from helpers.quality.metrics import ate, rpe
+    from helpers.slam.odometry import STAGES, Odometry, accepted_indices, prepare
 
     frames.time = preparation.time = SimpleNamespace(perf_counter=time.process_time)  # the stages' clocks read CPU
     config = with_settings(Config(), options["set"])
@@ -113,7 +113,7 @@ def main() -> None:
     )
     for lever in args.levers:
         for blas in args.blas:
-            env = {**os.environ, "OPENBLAS_NUM_THREADS": str(blas), "OMP_WAIT_POLICY": "PASSIVE"}
+            env = {**os.environ, "OPENBLAS_NUM_THREADS": str(blas), "OMP_WAIT_POLICY": "passive"}
             env.setdefault("OMP_NUM_THREADS", "1")
             options = {"set": LEVERS[lever] + args.set, "scans": args.scans}
             out = subprocess.run(

@@ -6,7 +6,7 @@
 Each flight repeats the first lap of the shipped waypoints (628 waypoints,
 1,256 m) and ends 120 m past its start, as the default does. Every run is a
 fresh process, so its peak resident memory is its own (with its helper
-process's for the edges back, :mod:`helpers.edges_worker`: the sum of the
+process's for the edges back, :mod:`helpers.slam.edges_back`: the sum of the
 two peaks, an upper bound). Time should grow linearly with the number of
 scans, memory should stay bounded; the figures say how far the current
 pipeline is from that.
@@ -38,9 +38,9 @@ PAST_START = 61  # waypoints flown past the start at the end (120 m): one lap is
 CHILD = """
 import json, resource, sys, time
 import helpers
-from helpers.config import Config
-from helpers.evaluation import run_metrics
-from helpers.slam import Slam
+from helpers.config.tables import Config
+from helpers.quality.evaluation import run_metrics
+from helpers.slam.slam import Slam
 path, mode, search, skip, lap = sys.argv[1], sys.argv[2], sys.argv[3], int(sys.argv[4]), int(sys.argv[5])
 start = time.perf_counter()
 data = helpers.create_dataset(waypoints_path=path, lazy=True)

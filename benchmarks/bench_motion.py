@@ -4,7 +4,7 @@
         [--scans N] [--swing 0.3] [--gnss-sigma 2] [--set registration.icp_local_map=6 ...]
 
 Each flight (``benchmarks/bench_bias.py``'s scenes and heights, parameters
-fitted as ``run`` fits them) is registered once by :class:`helpers.slam.Slam`;
+fitted as ``run`` fits them) is registered once by :class:`helpers.slam.slam.Slam`;
 its pose graph is then built and optimised again for every variant: lidar
 only, with the constant-velocity factor, with GNSS fixes of the given sigma
 (simulated from the true positions, seeded), and with both. ``--swing``
@@ -24,7 +24,7 @@ import os
 import sys
 import time
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, os.path.dirname(__file__))
 
@@ -33,14 +33,15 @@ from bench_bias import FLIGHTS, surface_of
 from bench_flights import with_settings
 
 from helpers import SensorConfig
-from helpers.config import Config
-from helpers.dataset import Dataset, LazyScans
-from helpers.fitting import fit_to_flight, flight_of
-from helpers.gnss import GnssFixes, simulate_gnss
-from helpers.mapio import IDENTITY_FRAME
-from helpers.metrics import ate
-from helpers.sensor import Surface, poses_from_waypoints
-from helpers.slam import Slam, build_pose_graph
+from helpers.config.tables import Config
+from helpers.quality.metrics import ate
+from helpers.sim.dataset import Dataset, LazyScans
+from helpers.sim.gnss import GnssFixes, simulate_gnss
+from helpers.sim.maps import IDENTITY_FRAME
+from helpers.sim.sensor import Surface, poses_from_waypoints
+from helpers.slam.flight_fit import fit_to_flight, flight_of
+from helpers.slam.graph.factors import gnss_factors
+from helpers.slam.slam import Slam, build_pose_graph
 
 SWING_PERIOD = 400.0  # m of track per period of the speed swing
 
@@ -125,7 +126,7 @@ def main() -> None:
             variant = dataclasses.replace(config, pose_graph=table)
             start = time.perf_counter()
             graph = build_pose_graph(odometry, slam.edges_back.sorted(), slam.loops.loops, variant)
-            for factor in gnss.factors(indices) if use_gnss else ():
+            for factor in gnss_factors(gnss, indices) if use_gnss else ():
                 graph.add_factor(factor)
             result = graph.optimize(anchor_pose=slam.anchor, loop_kernel=table.loop_kernel)
             error = ate(result.poses, truth)

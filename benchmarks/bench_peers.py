@@ -8,7 +8,7 @@ first true pose; the ATE is taken against the true poses of those scans.
 
 - ours, global: the reference's workflow (FPFH, matching, robust fit, ICP) for every scan, with our
   yaw-and-translation robust fit (``robust_fit = "msac4"``, the default) and the descriptor grid that
-  ``python -m helpers run`` fits to this flight (3 m, twice the reference's: ``helpers.fitting``);
+  ``python -m helpers run`` fits to this flight (3 m, twice the reference's: ``helpers.slam.flight_fit``);
 - ours, global, 1.5 m grid: the same on the reference's descriptor grid (``Config()``, the notebooks');
 - ours, global, rigid fit: the same with the reference's rigid fit (``robust_fit = "msac"``) and grid;
 - ours, global, keypoints 0.5: describing and matching the more tilted half of each scan (1.5 m grid);
@@ -49,12 +49,12 @@ import time
 import numpy as np
 
 import helpers
-from helpers.config import Config
-from helpers.fitting import DESCRIPTOR_GRID_FACTOR
-from helpers.icp import refine_icp
-from helpers.metrics import ate
-from helpers.odometry import run_odometry
-from helpers.preparation import prepare as prepare_frame
+from helpers.config.tables import Config
+from helpers.quality.metrics import ate
+from helpers.slam.flight_fit import DESCRIPTOR_GRID_FACTOR
+from helpers.slam.odometry import run_odometry
+from helpers.slam.preprocess import prepare as prepare_frame
+from helpers.slam.registration.icp import refine_icp
 
 VOXEL = 1.5  # m, Open3D's recipe (the reference's gridStep)
 
@@ -109,7 +109,7 @@ def open3d_recipe(scans, first_pose):
 def small_gicp_odometry(scans, first_pose):
     import small_gicp
 
-    from helpers.icp import threads
+    from helpers.slam.registration.icp import threads
 
     poses, motion = [first_pose], np.eye(4)
     previous = small_gicp.preprocess_points(scans[0], 0.75, num_threads=threads())

@@ -2,7 +2,7 @@
 
     .venv/bin/python benchmarks/bench_places.py [--flights autzen-150 sparse-150 default autzen-250 ...]
 
-A run asks :mod:`helpers.places` only after a blind stretch, and only at
+A run asks :mod:`helpers.slam.loops.places` only after a blind stretch, and only at
 queries the loop search closed nothing at, so on most flights it is never
 asked and a wrong recognition would be rare to see. Here every flight runs
 with the loop search's own candidates taken away (``find_loop_candidates``
@@ -14,7 +14,7 @@ Each flight runs once, in a fresh process, with its parameters fitted as
 ``bench_flights.py`` fits them (two laps on tiles), and prints:
 
 * recognitions asked, the loops they closed and how many were false
-  (:func:`helpers.evaluation.is_false_loop`), and the loop farthest from the
+  (:func:`helpers.quality.metrics.is_false_loop`), and the loop farthest from the
   truth (m, deg);
 * the optimised ATE and the run's seconds.
 """
@@ -32,12 +32,12 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 sys.path.insert(0, sys.argv[2])
-import helpers.loopclosure as lc
-import helpers.places as places
+import helpers.slam.loops.closer as lc
+import helpers.slam.loops.places as places
 from bench_flights import build_flight
-from helpers.evaluation import grade_loops, run_metrics
-from helpers.loopsearch import LoopCandidates
-from helpers.pipeline import run_slam
+from helpers.quality.evaluation import grade_loops, run_metrics
+from helpers.slam.loops.search import LoopCandidates
+from helpers.slam.pipeline import run_slam
 
 asked = []
 follow, recognise = places.PlaceRecognition.follow, places.PlaceRecognition.recognise

@@ -4,7 +4,7 @@ measure the odometry's accuracy; compare with Open3D's own feature RANSAC.
     .venv/bin/python benchmarks/bench_registration.py [--pairs N]
 
 Open3D's OpenMP threads spin after each parallel call and starve numpy's
-OpenBLAS threads; ``OMP_WAIT_POLICY=PASSIVE`` (set here before Open3D is
+OpenBLAS threads; ``OMP_WAIT_POLICY=passive`` (set here before Open3D is
 imported) avoids that.
 """
 
@@ -14,16 +14,16 @@ import argparse
 import os
 import time
 
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+os.environ.setdefault("OMP_WAIT_POLICY", "passive")
 
 import numpy as np
 import open3d as o3d
 
 from helpers import create_dataset
-from helpers.config import Config
-from helpers.features import to_cloud
-from helpers.metrics import ate, rpe
-from helpers.odometry import STAGES, prepare, run_odometry
+from helpers.config.tables import Config
+from helpers.quality.metrics import ate, rpe
+from helpers.slam.odometry import STAGES, prepare, run_odometry
+from helpers.slam.registration.features import to_cloud
 
 
 def main() -> None:

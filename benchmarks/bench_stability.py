@@ -14,8 +14,8 @@ import time
 import numpy as np
 
 import helpers
-from helpers.config import Config, SensorConfig
-from helpers.odometry import run_odometry
+from helpers.config.tables import Config, SensorConfig
+from helpers.slam.odometry import run_odometry
 
 
 def step_errors(relative: np.ndarray, poses_gt: np.ndarray, indices: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .errors import SlamError
+from helpers.errors import SlamError
 
 RIGID_TOLERANCE = 1e-5  # how far a pose's rotation may be from orthonormal, and its last row from 0 0 0 1
 

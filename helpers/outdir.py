@@ -5,25 +5,26 @@ never over a folder that holds anything the same command did not write.
 
 from __future__ import annotations
 
-import fcntl
+import ctypes
+import errno
+import logging
 import os
 import re
 import shutil
-import socket
 import tempfile
 from contextlib import ExitStack, contextmanager, suppress
 from pathlib import Path
 
-from .errors import SlamError
-from .paths import CACHE_VARIABLE, cache_dir
+from helpers.errors import SlamError
+from helpers.paths import CACHE_VARIABLE, cache_dir, dead_temporary, locked, temporary_name
+
+log = logging.getLogger(__name__)
 
 # Output folders. A command replaces its --out folder only when the folder is empty or holds nothing but
 # what the same command wrote there: its marker file lists every name it wrote. Work happens in a temporary
-# folder beside the target, named ".<out>.helpers-partial.<host>.<pid>.<random>", which a later write into the
-# same parent removes once that process is gone (a SIGKILL leaves it behind).
-TEMPORARY = re.compile(
-    r"\..+\.helpers-(partial|previous|probe)\.(?P<host>[A-Za-z0-9_-]+)\.(?P<pid>[0-9]+)\.[0-9a-f]{8}"
-)
+# folder beside the target, named ".<out>.helpers-partial.<host>.<pid>.<random>" (helpers.paths.TEMPORARY),
+# which a later write into the same parent removes once that process is gone (a SIGKILL leaves it behind).
+# The previous output is never removed before the new one stands in its place (_swap).
 MARKER_HEADER = "# Written by aerial-lidar-slam (python -m helpers):"
 
 
@@ -36,10 +37,17 @@ def check_output_place(out_dir: str | Path, marker: str, legacy: str | None = No
     ``legacy``: the file that marked an output of an older version (no list
     of its files): such a folder is left for the user to delete by hand.
     The check holds the parent folder's lock, as a writer's swap does, so
-    that it never sees another writer's output half replaced."""
+    that it never sees another writer's output half replaced; an output a
+    killed writer had set aside there is put back first (:func:`_remove_stale`)."""
+    parent = Path(os.path.realpath(out_dir)).parent
     with ExitStack() as stack:
-        with suppress(OSError):  # no parent folder yet (or one we may not open): nobody swaps there
-            stack.enter_context(_locked(Path(os.path.realpath(out_dir)).parent))
+        try:
+            stack.enter_context(locked(parent))
+        except OSError:  # no parent folder yet (or one we may not open): nobody swaps there
+            pass
+        else:
+            with suppress(OSError):
+                _remove_stale(parent)
         return _check_place(out_dir, marker, legacy)
 
 
@@ -117,12 +125,12 @@ def atomic_dir(out_dir: str | Path, marker: str, legacy: str | None = None):
     work = None
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        with _locked(target.parent):
+        with locked(target.parent):
             _remove_stale(target.parent)
         work = _new_folder(target.parent, target.name, "partial")
         yield work
         _write_marker(work, marker)
-        with _locked(target.parent):
+        with locked(target.parent):
             _check_place(given, marker, legacy)  # the user may have put files there while we worked
             _swap(work, target)
     except BaseException as exc:
@@ -143,7 +151,7 @@ def scratch_dir(name: str):
     when the block ends; one that a killed process left there goes at the
     next call (as :func:`atomic_dir`'s do)."""
     parent = Path(tempfile.gettempdir())
-    with _locked(parent):
+    with locked(parent):
         _remove_stale(parent)
     folder = _new_folder(parent, name, "partial")
     try:
@@ -162,12 +170,19 @@ def _which_file(filename, work: Path | None, target: Path) -> str:
 
 
 def _swap(work: Path, target: Path) -> None:
-    """``work`` takes the place of ``target``; the previous ``target`` is put
-    back if that fails, and removed once it succeeds."""
+    """``work`` takes the place of ``target``. Both are exchanged in one step
+    where the system can (:func:`_exchange`): a kill at any point leaves the
+    old or the new output at ``target``. Elsewhere it takes two renames; the
+    previous ``target`` is put back if the second fails, and a process killed
+    between them leaves it for the next writer in the same parent to put back
+    (:func:`_remove_stale`)."""
     if not os.path.lexists(target):
         os.rename(work, target)
         return
-    previous = target.parent / _new_name(target.name, "previous")
+    if _exchange(work, target):
+        shutil.rmtree(work, ignore_errors=True)  # now the previous output; what stays goes with _remove_stale
+        return
+    previous = target.parent / temporary_name(target.name, "previous")
     os.rename(target, previous)
     try:
         os.rename(work, target)
@@ -177,19 +192,31 @@ def _swap(work: Path, target: Path) -> None:
     shutil.rmtree(previous, ignore_errors=True)  # what stays (a file we may not delete) goes with _remove_stale
 
 
-def _new_name(name: str, kind: str) -> str:
-    return f".{name}.helpers-{kind}.{_host()}.{os.getpid()}.{os.urandom(4).hex()}"
+_AT_FDCWD, _RENAME_EXCHANGE = -100, 2
+try:
+    _renameat2 = ctypes.CDLL(None, use_errno=True).renameat2  # glibc 2.28 and later
+    _renameat2.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
+except (OSError, AttributeError):
+    _renameat2 = None
 
 
-def _host() -> str:
-    """This machine's name as a temporary folder carries it: a pid means something only on its own host."""
-    return re.sub(r"[^A-Za-z0-9_-]", "_", socket.gethostname().split(".")[0])[:20] or "host"  # short paths
+def _exchange(a: Path, b: Path) -> bool:
+    """Exchange two paths in one step (Linux's ``renameat2`` with ``RENAME_EXCHANGE``); False where the C
+    library, the kernel or the file system cannot, an :class:`OSError` for any other refusal."""
+    if _renameat2 is None:
+        return False
+    if _renameat2(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.EINVAL, errno.ENOSYS, errno.EOPNOTSUPP):
+        return False
+    raise OSError(code, os.strerror(code), str(b))
 
 
 def _new_folder(parent: Path, name: str, kind: str) -> Path:
     """A new folder of ours beside ``name``, with the mode a plain mkdir gives (the umask's)."""
     while True:
-        folder = parent / _new_name(name, kind)
+        folder = parent / temporary_name(name, kind)
         try:
             folder.mkdir()
             return folder
@@ -198,34 +225,26 @@ def _new_folder(parent: Path, name: str, kind: str) -> Path:
 
 
 def _remove_stale(parent: Path) -> None:
-    """Remove the temporary folders of ours in ``parent`` whose process,
-    on this host, is gone: only names of our exact pattern, nothing else."""
-    host = _host()
+    """Clear what writers of this host that are gone left in ``parent`` (only
+    names of :data:`helpers.paths.TEMPORARY`'s exact pattern, nothing else):
+    an output that a writer killed in the middle of its swap had set aside is
+    put back where it was if nothing took its place; the rest is removed."""
     for entry in os.scandir(parent):
-        match = TEMPORARY.fullmatch(entry.name)
-        if match and match["host"] == host and entry.is_dir(follow_symlinks=False) and not _alive(int(match["pid"])):
-            shutil.rmtree(entry.path, ignore_errors=True)
-
-
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # another user's process, or a pid we cannot ask about: alive
-        return True
-    return True
-
-
-@contextmanager
-def _locked(folder: Path):
-    """An exclusive lock on ``folder`` itself (flock on the directory: no lock file to leave behind)."""
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX)
-        yield
-    finally:
-        os.close(fd)
+        match = dead_temporary(entry.name)
+        if match is None or not entry.is_dir(follow_symlinks=False):
+            continue
+        target = parent / match["name"]
+        if match["kind"] == "previous" and not os.path.lexists(target):
+            try:
+                os.rename(entry.path, target)
+            except OSError as exc:
+                log.warning("cannot put back output folder %s from %s: %s", target, entry.name, exc.strerror)
+            else:
+                log.warning(
+                    "output folder %s put back: a process (pid %s) was killed while replacing it", target, match["pid"]
+                )
+            continue
+        shutil.rmtree(entry.path, ignore_errors=True)
 
 
 def _entries(folder: Path) -> set[str]:

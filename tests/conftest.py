@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import NOISE_SEED_VARIABLE, SensorConfig, noise_seed_from_environment
-from helpers.waypoints import loop_waypoints
+from helpers.config.tables import NOISE_SEED_VARIABLE, SensorConfig, noise_seed_from_environment
+from helpers.sim.waypoints import loop_waypoints
 
 AUTZEN = Path(__file__).resolve().parents[2] / "shared" / "data" / "autzen_trim.laz"  # the real tile beside the repo
 

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from helpers.__main__ import main
-from helpers.config import Config, FeaturesConfig, SensorConfig
-from helpers.configfile import config_to_toml, load_config
+from helpers.config.files import config_to_toml, load_config
+from helpers.config.tables import Config, FeaturesConfig, SensorConfig
 
 
 def run(*args):
@@ -124,7 +124,8 @@ def test_an_untrusted_run_warns_once_and_says_so_in_the_metrics(flat_plane, tmp_
     result = run("run", "--map", str(tile), "--waypoints", str(flight), "--out", str(out))
     assert result.returncode == 0, result.stderr
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
-    assert len(warnings) == 1 and "cannot be trusted" in warnings[0] and "skip_frames" in warnings[0]
+    assert warnings[0] == "warning: no unit in the LAS header's CRS records: assuming metres"  # the plane's tile
+    assert len(warnings) == 2 and "cannot be trusted" in warnings[1] and "skip_frames" in warnings[1]
     assert "scan 3:" not in result.stderr  # each fallback is counted, not printed
     assert "parameters fitted to the flight (600 m above the ground" in result.stdout  # the reference's height
     assert "9 of 9 odometry steps fell back" in result.stdout

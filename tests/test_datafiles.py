@@ -1,5 +1,5 @@
 """``data/aerialMap.tar.gz`` and ``data/gTruthWayPoints.mat`` are the default
-flight in the reference's file formats: written by ``helpers.datafiles``,
+flight in the reference's file formats: written by ``helpers.sim.reference_files``,
 equal to what it writes now, and read back as the package's own scene and loop."""
 
 import gzip
@@ -11,10 +11,10 @@ import pytest
 from scipy.io import loadmat
 
 import helpers
-from helpers import datafiles
-from helpers.dataset import MAP_CELL
 from helpers.errors import SlamError
-from helpers.mapio import height_field_from_points, read_map
+from helpers.sim import reference_files as datafiles
+from helpers.sim.dataset import MAP_CELL
+from helpers.sim.maps import height_field_from_points, read_map
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
@@ -28,7 +28,9 @@ def fresh():
 def test_the_committed_files_are_what_the_package_writes(fresh):
     # gzip's deflate may differ between zlib builds: the tar inside, tile bytes included, must not.
     committed_tar = gzip.decompress((DATA / datafiles.MAP_FILE).read_bytes())
-    assert committed_tar == gzip.decompress(fresh[datafiles.MAP_FILE]), "run: python -m helpers.datafiles data"
+    assert committed_tar == gzip.decompress(fresh[datafiles.MAP_FILE]), (
+        "run: python -m helpers.sim.reference_files data"
+    )
     assert (DATA / datafiles.WAYPOINTS_FILE).read_bytes() == fresh[datafiles.WAYPOINTS_FILE]
 
 
@@ -72,7 +74,7 @@ def test_a_file_it_did_not_write_is_refused_and_left_alone(tmp_path, capsys):
     with tarfile.open(foreign, "w:gz") as tar:
         tar.add(Path(__file__), arcname=datafiles.TILE_NAME)
     before = foreign.read_bytes()
-    with pytest.raises(SlamError, match=r"was not written by helpers\.datafiles"):
+    with pytest.raises(SlamError, match=r"was not written by helpers\.sim\.reference_files"):
         datafiles.write_reference_files(tmp_path)
     assert datafiles.main([str(tmp_path)]) == 2
     assert capsys.readouterr().err.startswith("error: ")

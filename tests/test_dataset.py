@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import SensorConfig
+from helpers.config.tables import SensorConfig
 from helpers.errors import SlamError
-from helpers.scene import default_scene
-from helpers.trajectory import read_tum
+from helpers.sim.scene import default_scene
+from helpers.sim.tum import read_tum
 
 
 def test_default_flight_is_a_closed_loop_with_overlap(default_dataset):
@@ -112,7 +112,7 @@ def test_failed_write_leaves_nothing_behind(short_flight, tmp_path, monkeypatch)
             raise OSError("disk full")
         return original(path, points)
 
-    import helpers.dataset as dataset_module
+    import helpers.cli.outputs as dataset_module
 
     original = dataset_module.write_ply
     monkeypatch.setattr(dataset_module, "write_ply", failing_write)

@@ -1,20 +1,25 @@
-"""The edges back in a helper process (helpers.edges_worker): the same run to the bit as in place, also
+"""The edges back in a helper process (helpers.slam.edges_back): the same run to the bit as in place, also
 when the process cannot start or dies halfway, and a failure inside it raised as in place."""
 
 import io
 import logging
 import os
 import pickle
+import re
+import signal
+import struct
 import time
+from contextlib import contextmanager
 
 import numpy as np
 import pytest
 
-from helpers.config import Config
-from helpers.edges_worker import STARTUP_NODES, BackgroundEdges, serve
+from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.pipeline import run_slam
-from helpers.slam import Slam
+from helpers.slam import edges_back
+from helpers.slam.edges_back import STARTUP_NODES, BackgroundEdges, serve
+from helpers.slam.pipeline import run_slam
+from helpers.slam.slam import Slam
 
 SCANS = 90  # 30 nodes at the default skip_frames = 3, each with up to 3 edges back
 
@@ -58,7 +63,7 @@ def test_the_helper_process_gives_the_run_of_the_main_process(stretch, in_place,
         original(self, *args)
 
     monkeypatch.setattr(BackgroundEdges, "__init__", spy)
-    monkeypatch.setattr("helpers.pipeline.STARTUP_NODES", 30)
+    monkeypatch.setattr("helpers.slam.pipeline.STARTUP_NODES", 30)
     assert STARTUP_NODES > 30
     _same(run_slam(stretch, Config()), in_place)
     assert started
@@ -71,7 +76,7 @@ def test_a_helper_process_that_dies_halfway_leaves_the_same_run(stretch, in_plac
             slam.edges_back.process.kill()
             slam.edges_back.process.wait()
 
-    with caplog.at_level(logging.WARNING, logger="helpers.edges_worker"):
+    with caplog.at_level(logging.WARNING, logger="helpers.slam.edges_back"):
         survived = _slam(stretch, background=True, on_node=kill_at_node_12)
     _same(survived, in_place)
     assert "registering them in this process" in caplog.text
@@ -79,7 +84,7 @@ def test_a_helper_process_that_dies_halfway_leaves_the_same_run(stretch, in_plac
 
 def test_a_helper_process_that_cannot_start_leaves_the_same_run(stretch, in_place, monkeypatch, caplog):
     monkeypatch.setattr("sys.executable", "/nonexistent/python")
-    with caplog.at_level(logging.WARNING, logger="helpers.edges_worker"):
+    with caplog.at_level(logging.WARNING, logger="helpers.slam.edges_back"):
         _same(_slam(stretch, background=True), in_place)
     assert "failed" in caplog.text
 
@@ -98,10 +103,12 @@ def test_a_failure_in_the_helper_process_is_answered_as_the_main_process_would_r
     answers = io.BytesIO()
     serve(requests, answers)
     answers.seek(0)
-    replies = [pickle.load(answers) for _ in range(3)]
+    replies = [pickle.loads(answers.read(struct.unpack("<Q", answers.read(8))[0])) for _ in range(3)]
+    assert answers.read() == b""
     assert [kind for kind, *_ in replies[:2]] == ["edges", "edges"]  # nodes 0 and 1 have no scan 2 back
-    kind, error, tried = replies[2]
+    kind, error, tried, seconds = replies[2]
     assert kind == "error" and isinstance(error, SlamError) and "points" in str(error) and tried == 0
+    assert seconds >= 0
 
 
 def test_a_run_left_without_its_result_exits_quietly_and_leaves_no_process(tmp_path):
@@ -112,8 +119,8 @@ def test_a_run_left_without_its_result_exits_quietly_and_leaves_no_process(tmp_p
 
     script = (
         "import helpers, os\n"
-        "from helpers.config import Config\n"
-        "from helpers.slam import Slam\n"
+        "from helpers.config.tables import Config\n"
+        "from helpers.slam.slam import Slam\n"
         "data = helpers.create_dataset()\n"
         "slam = Slam(Config(), anchor=data.poses[0], background=True)\n"
         "for i in range(0, 30, 3):\n"
@@ -132,3 +139,79 @@ def test_a_run_left_without_its_result_exits_quietly_and_leaves_no_process(tmp_p
         time.sleep(0.1)
     else:
         pytest.fail(f"the helper process {helper} is still running")
+
+
+# Issue 63: no wait on the helper process without a bound. A watchdog fails a test whose run would hang instead.
+
+
+class _Hung(Exception):
+    """The run still waited on the helper process after the watchdog's minutes (caught by nothing)."""
+
+
+@contextmanager
+def _watchdog(seconds: int = 240):
+    def hung(signum, frame):
+        raise _Hung(f"the run still waited after {seconds} s")
+
+    previous = signal.signal(signal.SIGALRM, hung)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def test_a_stopped_helper_process_is_noticed_and_the_run_is_the_same(stretch, in_place, caplog):
+    def stop_at_node_12(slam, node):
+        if node == 12:
+            os.kill(slam.edges_back.process.pid, signal.SIGSTOP)  # kill -STOP, a debugger, a frozen container
+
+    with caplog.at_level(logging.WARNING, logger="helpers.slam.edges_back"), _watchdog():
+        survived = _slam(stretch, background=True, on_node=stop_at_node_12)
+    _same(survived, in_place)
+    (warning,) = [r.getMessage() for r in caplog.records]
+    assert warning == "the edges back's helper process failed (it was stopped): registering them in this process"
+
+
+NEVER_ANSWERS = "import sys; sys.stdin.buffer.read()"  # reads every request, answers none
+STALLS_AT_NODE_12 = """
+import time
+from helpers.slam import edges_back
+add = edges_back.EdgesBack.add
+def stall(self, j, clouds, relative):
+    if j == 12:
+        time.sleep(3600)
+    return add(self, j, clouds, relative)
+edges_back.EdgesBack.add = stall
+edges_back.main()
+"""
+
+
+@pytest.mark.parametrize("helper", ["never answers", "stalls at node 12"])
+def test_a_helper_process_that_does_not_answer_is_given_up_after_its_bound(
+    stretch, in_place, monkeypatch, caplog, helper
+):
+    """Bounds made short here (the stand-ins never answer, so any bound is reached): half a second for the
+    first answer, or twice the slowest node so far and at least half a second."""
+    if helper == "never answers":
+        monkeypatch.setattr(edges_back, "HELPER", NEVER_ANSWERS)
+        monkeypatch.setattr(edges_back, "FIRST_WAIT_S", 0.5)
+    else:
+        monkeypatch.setattr(edges_back, "HELPER", STALLS_AT_NODE_12)
+        monkeypatch.setattr(edges_back, "MIN_WAIT_S", 0.5)
+        monkeypatch.setattr(edges_back, "WAIT_FACTOR", 2.0)
+    with caplog.at_level(logging.WARNING, logger="helpers.slam.edges_back"), _watchdog():
+        survived = _slam(stretch, background=True)
+    _same(survived, in_place)
+    (warning,) = [r.getMessage() for r in caplog.records]
+    assert re.fullmatch(
+        r"the edges back's helper process failed \(no answer in [0-9.]+ s\): registering them in this process", warning
+    )
+
+
+def test_the_helper_process_reads_the_openmp_wait_policy_in_any_locale(monkeypatch):
+    """libgomp compares it in the user's locale: in Turkish, "PASSIVE" is not "passive" (tests/test_faults.py)."""
+    monkeypatch.setenv("OMP_WAIT_POLICY", "PASSIVE")
+    environment = edges_back.helper_environment()
+    assert environment["OMP_WAIT_POLICY"] == "passive" and environment["OMP_NUM_THREADS"] == "1"

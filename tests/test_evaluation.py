@@ -5,9 +5,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers import evaluation
 from helpers.errors import SlamError
-from helpers.evaluation import format_table, map_errors, summary_table
+from helpers.quality import evaluation
+from helpers.quality.evaluation import map_errors, summary_table
 
 
 def _plane(step=0.5, size=20.0):
@@ -91,10 +91,3 @@ def test_summary_table_reuses_a_given_map_error(monkeypatch):
     given = map_errors(result.map_points, dataset.map_points + [0.0, 0.0, 1.0])  # 0.75 m, not 0.25
     table = {name: value for name, value, _ in summary_table(dataset, result, given)}
     assert table["map error, median"] == pytest.approx(0.75)
-
-
-def test_format_table_rounds_numbers_and_keeps_counts_whole():
-    text = format_table([("ATE", 0.123456, "m"), ("loops", 7, "count")])
-    lines = text.splitlines()
-    assert lines[0].split() == ["ATE", "0.123", "m"]
-    assert lines[1].split() == ["loops", "7", "count"]

@@ -6,10 +6,10 @@ import gtsam
 import numpy as np
 import pytest
 
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.errors import SlamError
 from helpers.exercises.loops import check_false_loop, check_search_radius
-from helpers.pipeline import Edge
+from helpers.slam.pipeline import Edge
 
 
 def pose(x, y, yaw_deg=0.0):

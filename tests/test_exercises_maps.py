@@ -5,7 +5,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from helpers.exercises import maps as exercises
-from helpers.metrics import ate
+from helpers.quality.metrics import ate
 
 
 def said(capsys) -> str:

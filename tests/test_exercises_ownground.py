@@ -4,8 +4,8 @@ import gtsam
 import numpy as np
 
 from helpers.exercises import ownground as ex
-from helpers.factors import pose3
-from helpers.metrics import ate
+from helpers.quality.metrics import ate
+from helpers.slam.graph.factors import pose3
 
 
 def said(capsys):

@@ -3,7 +3,7 @@
 import numpy as np
 
 from helpers.exercises.parameters import _footprint_overlap, check_grid_step, check_skip_frames
-from helpers.features import grid_average
+from helpers.slam.registration.features import grid_average
 
 
 def _plane(spacing=0.5, size=50.0):

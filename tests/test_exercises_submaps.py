@@ -5,9 +5,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.exercises.submaps import check_centre_and_reach, check_eligible
-from helpers.submaps import SubmapIndex
+from helpers.slam.submaps import SubmapIndex
 
 
 @pytest.fixture(scope="module")

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from helpers.errors import SlamError
-from helpers.features import fpfh, grid_average, keypoint_fpfh, keypoints, normalise_descriptors
+from helpers.slam.registration.features import fpfh, grid_average, keypoint_fpfh, keypoints, normalise_descriptors
 
 
 def test_grid_average_means_each_cell_in_a_stable_order():
@@ -75,9 +75,9 @@ def test_fpfh_refuses_too_few_points_and_nans():
 def test_slam_and_odometry_steps_run_on_one_blas_thread(monkeypatch):
     """A scan's processing holds numpy's BLAS to one thread (its idle threads would spin on the
     core FPFH needs) and gives the setting back afterwards."""
-    from helpers.config import Config
-    from helpers.odometry import Odometry
-    from helpers.slam import Slam
+    from helpers.config.tables import Config
+    from helpers.slam.odometry import Odometry
+    from helpers.slam.slam import Slam
     from helpers.threads import BLAS
 
     def blas_threads():

@@ -1,11 +1,12 @@
-"""The four-degree-of-freedom robust fit (yaw + translation, helpers.fit4dof), on matches with a known answer."""
+"""The four-degree-of-freedom robust fit (yaw + translation, msac_yaw), on matches with a known answer."""
 
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.fit4dof import (
+from helpers.slam.registration.msac import trials_needed
+from helpers.slam.registration.msac_yaw import (
     _distinct_pairs,
     _pair_terms,
     estimate_yaw_msac,
@@ -14,7 +15,6 @@ from helpers.fit4dof import (
     msac_costs,
     yaw_transform,
 )
-from helpers.registration import trials_needed
 
 EXTENT = np.array([50.0, 50.0, 10.0])  # half-extent of the synthetic matched points, m: a scan's strip of ground
 

@@ -5,8 +5,8 @@ import dataclasses
 
 import pytest
 
-from helpers.config import Config
-from helpers.fitting import DESCRIPTOR_GRID_FACTOR, REFERENCE_HEIGHT, Flight, fit_to_flight, flight_of
+from helpers.config.tables import Config
+from helpers.slam.flight_fit import DESCRIPTOR_GRID_FACTOR, REFERENCE_HEIGHT, Flight, fit_to_flight, flight_of
 
 
 def test_the_reference_flight_gets_the_reference_values_but_a_coarser_descriptor_grid(default_dataset):

@@ -9,11 +9,14 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import SensorConfig
-from helpers.dataset import MARKER, create_dataset, write_dataset
+from helpers.cli.outputs import DATASET_MARKER as MARKER
+from helpers.cli.outputs import write_dataset
+from helpers.config.tables import SensorConfig
 from helpers.errors import SlamError
-from helpers.gnss import FILE_NAME, GnssFixes, parse_sigma, read_gnss, simulate_gnss
-from helpers.posegraph import PoseGraph
+from helpers.sim.dataset import create_dataset
+from helpers.sim.gnss import FILE_NAME, GnssFixes, parse_sigma, read_gnss, simulate_gnss
+from helpers.slam.graph.factors import gnss_factors
+from helpers.slam.graph.optimizer import PoseGraph
 
 GNSS = SensorConfig(gnss_sigma_horizontal=2.0, gnss_sigma_vertical=3.0)
 
@@ -101,7 +104,7 @@ def test_sigmas_and_flight_checks():
     with pytest.raises(SlamError, match=r"1 scan index.*not in the flight of 9 scans.*9"):
         fixes.check_flight(9)
     # nodes are accepted scans 0, 3, 6, 9: scans 0, 3 and 9 have fixes, on nodes 0, 1 and 3
-    assert [f.node for f in fixes.factors([0, 3, 6, 9])] == [0, 1, 3]
+    assert [f.node for f in gnss_factors(fixes, [0, 3, 6, 9])] == [0, 1, 3]
     with pytest.raises(SlamError, match="sigmas must be 3 positive"):
         GnssFixes(np.array([0]), np.zeros((1, 3)), np.array([1.0, 1.0, 0.0]))
     with pytest.raises(SlamError, match="positions must be 1 x 3 finite"):
@@ -124,7 +127,7 @@ def test_gps_factors_pull_a_drifting_chain_onto_the_fixes(seed):
         graph.append(step, sigmas=[0.1, 0.1, 0.1, 0.005, 0.005, 0.005])
     drifted = graph.optimize(anchor_pose=truth[0]).poses
     fixes = GnssFixes(np.arange(101), simulate_gnss(truth[:, :3, 3], 2.0, 2.0, seed=seed), np.full(3, 2.0))
-    for factor in fixes.factors(np.arange(101)):
+    for factor in gnss_factors(fixes, np.arange(101)):
         graph.add_factor(factor)
     fixed = graph.optimize(anchor_pose=truth[0]).poses
 
@@ -196,7 +199,7 @@ def test_gnss_of_2_m_brings_a_low_flight_well_under_2_m(tmp_path):
     metrics = json.loads((tmp_path / "run" / "metrics.json").read_text())
     assert metrics["ate_rmse_odometry_m"] > 1.0
     assert metrics["ate_rmse_optimized_m"] < 0.5
-    # the run judges itself by the ATE its graph expects (helpers.graph_measures.expected_ate): 0.48 m here against
+    # the run judges itself by the ATE its graph expects (graph_checks.expected_ate): 0.48 m here against
     # 0.35 m true; the true ATE moves with the machine (0.19-0.35 m) where the expectation hardly does
     expected = metrics["health"]["expected_ate_m"]
     assert expected / 3 < metrics["ate_rmse_optimized_m"] < 3 * expected
@@ -209,31 +212,31 @@ def test_gnss_of_2_m_costs_little_where_the_lidar_is_good(flight_over):
     0.160 -> 0.188 m). With the default fixed sigmas (0.3 degrees a step, some twenty times the real
     rotation error) the fixes bend this loopless stretch instead (0.159 -> 0.723 m): the calibrated
     information of issue 21 item 2 is what GNSS needs."""
-    from helpers.config import Config
-    from helpers.gnss import GnssFixes
-    from helpers.metrics import ate
-    from helpers.pipeline import run_slam
+    from helpers.config.tables import Config
+    from helpers.quality.metrics import ate
+    from helpers.sim.gnss import GnssFixes
+    from helpers.slam.pipeline import run_slam
 
     data = flight_over(slice(0, 100))
     config = Config().with_values(pose_graph={"edge_sigma_m": 0.05, "edge_sigma_deg": 0.03})
     lidar = run_slam(data, config)
     fixes = GnssFixes(np.arange(len(data)), simulate_gnss(data.poses[:, :3, 3], 2.0, 2.0, seed=0), np.full(3, 2.0))
     both = run_slam(data, config, odometry=lidar.odometry, gnss=fixes)
-    assert lidar.n_gnss_fixes == 0 and both.n_gnss_fixes == len(both.indices)  # one fix a node
+    assert len(lidar.gnss_factors) == 0 and len(both.gnss_factors) == len(both.indices)  # one fix a node
     truth = data.poses[lidar.indices]
     alone, fixed = ate(lidar.poses_optimized, truth).rmse, ate(both.poses_optimized, truth).rmse
     assert fixed <= alone + 0.1, (alone, fixed)
 
 
 def test_with_gnss_the_fit_weighs_the_edges_so_the_fixes_cost_little(flight_over):
-    """The same stretch as `run --gnss` fits it (helpers.fitting: with GNSS, each edge weighed by its
+    """The same stretch as `run --gnss` fits it (helpers.slam.flight_fit: with GNSS, each edge weighed by its
     registration's information instead of the fixed sigmas): its own 2 m GNSS leaves the optimised ATE within
     0.1 m of the lidar-only run as `run` fits it without GNSS."""
-    from helpers.config import Config
-    from helpers.fitting import fit_to_flight, flight_of
-    from helpers.gnss import GnssFixes
-    from helpers.metrics import ate
-    from helpers.pipeline import run_slam
+    from helpers.config.tables import Config
+    from helpers.quality.metrics import ate
+    from helpers.sim.gnss import GnssFixes
+    from helpers.slam.flight_fit import fit_to_flight, flight_of
+    from helpers.slam.pipeline import run_slam
 
     data = flight_over(slice(0, 100))
     alone_config, _ = fit_to_flight(flight_of(data), Config(sensor=data.sensor))

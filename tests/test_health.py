@@ -1,4 +1,4 @@
-"""The trust flag's rules (helpers.health) on built runs whose answer is known: a straight flight of
+"""The trust flag's rules (helpers.quality.trust) on built runs whose answer is known: a straight flight of
 2 m steps (or a hover), odometry steps and loops with chosen information, the graph optimised for real."""
 
 from types import SimpleNamespace
@@ -6,11 +6,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.factors import Edge
-from helpers.gnss import GnssFixes
-from helpers.graph_measures import (
+from helpers.quality.graph_checks import (
     FALSE_LOOP_SIGMAS,
     correction_sigmas,
     left_out_residuals,
@@ -18,10 +16,12 @@ from helpers.graph_measures import (
     optimized_with,
     rebuilt_poses,
 )
-from helpers.health import BLIND_RUN_STEPS, CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
-from helpers.information import calibrated
-from helpers.odometry import OdometryResult
-from helpers.slam import build_pose_graph
+from helpers.quality.trust import BLIND_RUN_STEPS, CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
+from helpers.sim.gnss import GnssFixes
+from helpers.slam.graph.factors import Edge, gnss_factors
+from helpers.slam.graph.information import calibrated
+from helpers.slam.odometry import OdometryResult
+from helpers.slam.slam import build_pose_graph
 
 CONFIG = Config().with_values(pose_graph={"graph_weights": "hessian"})
 NODES = 30
@@ -233,7 +233,7 @@ def test_gnss_fixes_moving_the_trajectory_are_no_loop_correction():
     receiver): the fixes swing the trajectory about its anchored first node by metres, the loop still
     moves it by nothing."""
     positions = np.array([[2.0 * k, 3.0, 0.0] for k in range(NODES)])
-    fixes = GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)).factors(np.arange(NODES) * 3)
+    fixes = gnss_factors(GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)), np.arange(NODES) * 3)
     run = _run(loops=[_loop_off_by(0.0, 0.05)], fixes=fixes)
     assert run.graph.poses[-1, 1, 3] > 1.0  # the fixes did move it
     assert assess(run).counts["largest_correction_m"] < 0.01
@@ -247,7 +247,7 @@ def test_the_runs_own_graph_is_reused_only_where_it_is_the_rebuilt_one():
     assert rebuilt_poses(run) is run.graph.poses
     np.testing.assert_array_equal(rebuilt_poses(run), optimized_with(run, run.loops))
     positions = np.array([[2.0 * k, 3.0, 0.0] for k in range(NODES)])
-    fixes = GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)).factors(np.arange(NODES) * 3)
+    fixes = gnss_factors(GnssFixes(np.arange(NODES) * 3, positions, np.full(3, 0.5)), np.arange(NODES) * 3)
     run = _run(informations=[_info(0.1)] * (NODES - 1), loops=[_loop_off_by(1.5, 0.1)], fixes=fixes)
     rebuilt = rebuilt_poses(run)
     np.testing.assert_array_equal(rebuilt, optimized_with(run, run.loops))
@@ -257,7 +257,7 @@ def test_the_runs_own_graph_is_reused_only_where_it_is_the_rebuilt_one():
 def _fixes(sigma):
     """A GNSS fix of ``sigma`` m on x, y and z at every node, on the true positions."""
     positions = np.array([[2.0 * k, 0.0, 0.0] for k in range(NODES)])
-    return GnssFixes(np.arange(NODES) * 3, positions, np.full(3, sigma)).factors(np.arange(NODES) * 3)
+    return gnss_factors(GnssFixes(np.arange(NODES) * 3, positions, np.full(3, sigma)), np.arange(NODES) * 3)
 
 
 def test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing():
@@ -399,12 +399,12 @@ def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch,
     """Where GTSAM cannot give the marginals a measure of the graph needs (the loops left out, the loops' move
     in sigmas, the ATE it expects of itself), the graph does not vouch for itself: the drift rules stand, and
     the warning says why (a run is never crashed by its own health check)."""
-    import helpers.health
+    import helpers.quality.trust
 
     def fails(*args, **kwargs):
         raise SlamError("indeterminant linear system")
 
-    monkeypatch.setattr(helpers.health, measure, fails)
+    monkeypatch.setattr(helpers.quality.trust, measure, fails)
     health = assess(_held_by_loops())
     assert not health.trusted and "too flat" in health.warning()
     assert "its marginals could not be computed (indeterminant linear system)" in health.warning()
@@ -416,12 +416,12 @@ def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch,
 def test_gnss_fixes_whose_graph_cannot_say_how_sure_it_is_leave_a_run_untrusted(monkeypatch):
     """The run of test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing, trusted with 0.3 m fixes, when
     GTSAM cannot give the graph's marginals: not trusted, and the warning says so."""
-    import helpers.health_rules  # where the run's facts, a GNSS graph's expected ATE among them, are measured
+    import helpers.quality.trust_rules  # where the run's facts, a GNSS graph's expected ATE among them, are measured
 
     def fails(result):
         raise SlamError("indeterminant linear system")
 
-    monkeypatch.setattr(helpers.health_rules, "expected_ate", fails)
+    monkeypatch.setattr(helpers.quality.trust_rules, "expected_ate", fails)
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(0.3)))
     assert not health.trusted and health.counts["expected_ate_m"] is None
     assert "could not say how far off" in health.warning() and "indeterminant linear system" in health.warning()

@@ -1,16 +1,16 @@
-"""The information of a registration (helpers.information) against cases whose answer is known."""
+"""The information of a registration (helpers.slam.graph.information) against cases whose answer is known."""
 
 import numpy as np
 import pytest
 
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.factors import Edge
 from helpers.geometry import transform_points
-from helpers.icp import icp_cloud, refine_icp
-from helpers.information import MAX_SIGMA, blended, calibrated, plane_information, weakest, whitened
-from helpers.odometry import OdometryResult
-from helpers.slam import build_pose_graph
+from helpers.slam.graph.factors import Edge
+from helpers.slam.graph.information import MAX_SIGMA, blended, calibrated, plane_information, weakest, whitened
+from helpers.slam.odometry import OdometryResult
+from helpers.slam.registration.icp import icp_cloud, refine_icp
+from helpers.slam.slam import build_pose_graph
 
 ICP = {"inlier_distance": 2.0, "max_iterations": 30, "tolerance": 1e-6}
 
@@ -153,7 +153,7 @@ def test_hessian_weights_believe_the_edge_that_is_sure(weights, expected):
 
 def test_the_icp_service_hands_out_calibrated_information():
     """What the run's ICP service returns is the raw information scaled and floored by [pose_graph]."""
-    from helpers.icp_service import IcpService
+    from helpers.slam.registration.icp_service import IcpService
 
     config = Config().with_values(pose_graph={"information_scale": 0.2, "min_sigma_m": 0.01, "min_sigma_deg": 0.02})
     run = IcpService.from_config(config.registration, pose_graph=config.pose_graph)

@@ -18,8 +18,8 @@ import pytest
 
 from helpers.__main__ import main
 from helpers.errors import SlamError
-from helpers.mapio import read_map
-from helpers.waypoints import MAX_WAYPOINTS, read_waypoints
+from helpers.sim.maps import read_map
+from helpers.sim.waypoints import MAX_WAYPOINTS, read_waypoints
 
 
 def _small_las(path, n=40):
@@ -97,9 +97,9 @@ def test_a_bomb_on_the_command_line_is_one_error_line_within_seconds(tmp_path, c
 
 
 def test_the_size_cap_holds_while_streaming(tmp_path, monkeypatch):
-    import helpers.mapio
+    import helpers.sim.maps
 
-    monkeypatch.setattr(helpers.mapio, "MAX_TILE_BYTES", 1 << 20)
+    monkeypatch.setattr(helpers.sim.maps, "MAX_TILE_BYTES", 1 << 20)
     archive = tmp_path / "big.tar.gz"
     noise = np.random.default_rng(0).bytes(2 << 20)  # does not compress: passes the ratio check
     _tar_gz(archive, "tile.las", len(noise), [noise])
@@ -155,7 +155,7 @@ def test_an_upper_case_member_is_extracted_once(tmp_path, monkeypatch):
     with tarfile.open(archive, "w:gz") as tar:
         tar.add(tile, arcname="TILE.LAZ")
     first = read_map(archive)
-    assert _cache_files(tmp_path)[-1].endswith("TILE.LAZ")
+    assert [name.rsplit("/", 1)[-1] for name in _cache_files(tmp_path)[1:]] == ["TILE.LAZ", "tile.json"]
 
     def no_second_extraction(*args, **kwargs):
         raise AssertionError("the archive was opened again")

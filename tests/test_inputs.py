@@ -11,13 +11,13 @@ import scipy.sparse
 from scipy.io import savemat
 
 from helpers.__main__ import main
-from helpers.config import STAGE_TABLES, Config, SensorConfig, noise_seed_from_environment
-from helpers.configfile import load_config
-from helpers.dataset import create_dataset
+from helpers.config.bounds import MAX_RAYS_PER_FLIGHT, MAX_RAYS_PER_SCAN
+from helpers.config.files import load_config
+from helpers.config.tables import STAGE_TABLES, Config, SensorConfig, noise_seed_from_environment
 from helpers.errors import SlamError
-from helpers.limits import MAX_RAYS_PER_FLIGHT, MAX_RAYS_PER_SCAN
-from helpers.sensor import poses_from_waypoints, ray_pattern
-from helpers.waypoints import MAX_WAYPOINTS, read_waypoints
+from helpers.sim.dataset import create_dataset
+from helpers.sim.sensor import poses_from_waypoints, ray_pattern
+from helpers.sim.waypoints import MAX_WAYPOINTS, read_waypoints
 
 TINY_STEPS = "[sensor]\nazimuth = [-13, 13, 0.00001]\nelevation = [-2.5, 2.5, 0.00001]\n"
 

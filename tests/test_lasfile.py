@@ -15,7 +15,7 @@ import pytest
 from laspy.vlrs.vlrlist import VLRList
 
 from helpers.errors import SlamError
-from helpers.mapio import height_field_from_points, read_map
+from helpers.sim.maps import height_field_from_points, read_map
 
 N_POINTS = 300
 TIME_LIMIT_S = 10  # a safety bound, not a benchmark: a damaged header once made laspy read for minutes
@@ -218,3 +218,4 @@ def test_a_map_too_wide_for_its_grid_is_refused_before_allocating():
     with pytest.raises(SlamError, match=r"the map spans 10000001 x 10000001 m: 1e\+14 cells .*limit is 50,000,000"):
         height_field_from_points(points, np.zeros(3, np.uint8), cell=1.0)
     assert time.perf_counter() - start < TIME_LIMIT_S
+

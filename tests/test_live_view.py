@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from nbclient import NotebookClient
 
-from helpers.config import Config
-from helpers.odometry import OdometryResult
-from helpers.pipeline import Slam
+from helpers.config.tables import Config
+from helpers.slam.odometry import OdometryResult
+from helpers.slam.pipeline import Slam
 from helpers.viz.live import LiveView
 
 # A short loop has few submaps; no edges back: the view shows odometry and loops.
@@ -76,7 +76,7 @@ def test_in_a_kernel_the_view_is_one_picture_updated_in_place():
     """As JupyterLab runs it: many redraws, one output, showing the last frame."""
     code = """
 import numpy as np
-from helpers.slam import Step
+from helpers.slam.slam import Step
 from helpers.viz.live import LiveView
 truth = np.zeros((30, 4, 4)); truth[:] = np.eye(4); truth[:, 0, 3] = np.arange(30.0)
 live = LiveView(truth, every=3)

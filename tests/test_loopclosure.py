@@ -6,10 +6,10 @@ import open3d as o3d
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import Config, LoopClosureConfig, MapConfig
+from helpers.config.tables import Config, LoopClosureConfig, MapConfig
 from helpers.errors import SlamError
-from helpers.icp_service import IcpService
-from helpers.loopclosure import (
+from helpers.slam.graph.optimizer import PoseGraph
+from helpers.slam.loops.closer import (
     LoopCandidates,
     LoopCloser,
     best_scan_registration,
@@ -17,8 +17,8 @@ from helpers.loopclosure import (
     find_loop_candidates,
     icp_with,
 )
-from helpers.posegraph import PoseGraph
-from helpers.submaps import SubmapIndex
+from helpers.slam.registration.icp_service import IcpService
+from helpers.slam.submaps import SubmapIndex
 
 RADIUS = 7.9  # m, the reference's loopClosureSearchRadius
 THRESHOLD = 0.6  # the reference's loopClosureThreshold and rmseThreshold
@@ -281,8 +281,8 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
     distance along the normals does not."""
     from scipy.spatial import cKDTree
 
-    from helpers.features import grid_average
-    from helpers.icp_service import surface_rmse
+    from helpers.slam.registration.features import grid_average
+    from helpers.slam.registration.icp_service import surface_rmse
 
     moving, fixed = grid_average(default_dataset.scans[629], 0.75), grid_average(default_dataset.scans[0], 0.75)
     truth = np.linalg.inv(default_dataset.poses[0]) @ default_dataset.poses[629]
@@ -301,9 +301,9 @@ def test_surface_rmse_grows_with_misalignment_where_point_rmse_does_not(default_
 def test_the_service_scores_with_the_alignments_own_pairs(default_dataset, monkeypatch):
     """A registration through the service is scored on the pairs its alignment's last pass found: the same
     surface RMSE, to the bit, as scoring it anew, and one nearest-neighbour pass fewer."""
-    import helpers.icp
-    from helpers.features import grid_average
-    from helpers.icp_service import surface_rmse
+    import helpers.slam.registration.icp
+    from helpers.slam.registration.features import grid_average
+    from helpers.slam.registration.icp_service import surface_rmse
 
     moving, fixed = grid_average(default_dataset.scans[3], 0.75), grid_average(default_dataset.scans[0], 0.75)
     truth = np.linalg.inv(default_dataset.poses[0]) @ default_dataset.poses[3]
@@ -311,8 +311,10 @@ def test_the_service_scores_with_the_alignments_own_pairs(default_dataset, monke
     guess[:3, 3] += [0.4, -0.3, 0.1]
     service = icp_with("plane-to-plane", 3.0, 6, 1e-3, "small_gicp")
     passes = []
-    real = helpers.icp.IcpCloud.nearest
-    monkeypatch.setattr(helpers.icp.IcpCloud, "nearest", lambda self, points: passes.append(1) or real(self, points))
+    real = helpers.slam.registration.icp.IcpCloud.nearest
+    monkeypatch.setattr(
+        helpers.slam.registration.icp.IcpCloud, "nearest", lambda self, points: passes.append(1) or real(self, points)
+    )
     T, score = service(moving=moving, fixed=fixed, T_fixed_moving=guess)
     assert len(passes) == 1  # the alignment's RMSE pass; the score reads it
     assert np.linalg.norm(T[:3, 3] - truth[:3, 3]) < 0.2  # from 0.51 m off
@@ -322,12 +324,14 @@ def test_the_service_scores_with_the_alignments_own_pairs(default_dataset, monke
 
 def test_icp_fn_keeps_only_the_recently_used_clouds_ready(monkeypatch):
     """Clouds are made ready once while recent, and at most PREPARED_CLOUDS are kept (memory on long flights)."""
-    import helpers.icp
-    from helpers import icp_service
+    import helpers.slam.registration.icp
+    from helpers.slam.registration import icp_service
 
     made = []
-    real = helpers.icp.icp_cloud
-    monkeypatch.setattr(helpers.icp, "icp_cloud", lambda points, *a: made.append(id(points)) or real(points, *a))
+    real = helpers.slam.registration.icp.icp_cloud
+    monkeypatch.setattr(
+        helpers.slam.registration.icp, "icp_cloud", lambda points, *a: made.append(id(points)) or real(points, *a)
+    )
     monkeypatch.setattr(icp_service, "PREPARED_CLOUDS", 3)
     icp_fn = icp_with("plane-to-plane", 3.0, 5, 1e-3, "small_gicp")
     rng = np.random.default_rng(0)
@@ -380,8 +384,8 @@ def test_the_health_report_counts_a_revisit_where_the_loop_closer_would_search()
     far enough; the health report counts those, and none with a fixed radius."""
     from types import SimpleNamespace
 
-    from helpers.graph_measures import revisits
-    from helpers.loopclosure import radius_after
+    from helpers.quality.graph_checks import revisits
+    from helpers.slam.loops.closer import radius_after
 
     x = np.arange(0.0, 101.0)
     xy = np.concatenate([np.column_stack([x, np.zeros_like(x)]), np.column_stack([x[::-1], np.full_like(x, 9.0)])])
@@ -447,7 +451,7 @@ def test_a_loop_match_registered_on_the_overlap_leaves_the_pull_of_the_unseen_gr
     old strip's edge pair with the edge); registered again on its part over the old strip, round after round,
     it ends on the truth. Where every point already lies over the old strip there is nothing to crop."""
     from helpers.geometry import relative_pose_error
-    from helpers.overlap import on_overlap
+    from helpers.slam.registration.overlap import on_overlap
 
     moving, fixed, T_true = half_over_old_ground(yaw_deg, ahead)
     whole = OVERLAP_ICP(moving=moving, fixed=fixed, T_fixed_moving=T_true, max_iterations=50)

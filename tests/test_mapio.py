@@ -8,10 +8,10 @@ import pytest
 from scipy.io import savemat
 
 import helpers
-from helpers.config import noise_seed_from_environment
+from helpers.config.tables import noise_seed_from_environment
 from helpers.errors import SlamError
-from helpers.mapio import height_field_from_points, read_map
-from helpers.waypoints import read_waypoints
+from helpers.sim.maps import height_field_from_points, read_map
+from helpers.sim.waypoints import read_waypoints
 
 FOOT = 0.3048
 
@@ -71,7 +71,7 @@ def test_the_scans_of_a_real_tile_lie_on_its_points(autzen):
     the tile's own spacing."""
     from scipy.spatial import cKDTree
 
-    from helpers.dataset import MAP_CELL
+    from helpers.sim.dataset import MAP_CELL
 
     tile = read_map(autzen)
     sensor = helpers.SensorConfig(altitude=280.0, seed=noise_seed_from_environment())  # about 150 m above ground

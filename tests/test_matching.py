@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from helpers.errors import SlamError
-from helpers.features import normalise_descriptors
-from helpers.matching import match_features
+from helpers.slam.registration.features import normalise_descriptors
+from helpers.slam.registration.matching import match_features
 
 
 def _unit(v):
@@ -150,8 +150,8 @@ def test_the_gate_refuses_bad_positions():
 )
 def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs, near):
     script = (
-        "import numpy as np; from helpers.features import normalise_descriptors;"
-        "from helpers.matching import match_features;"
+        "import numpy as np; from helpers.slam.registration.features import normalise_descriptors;"
+        "from helpers.slam.registration.matching import match_features;"
         "rng = np.random.default_rng(4); f = normalise_descriptors(rng.gamma(0.5, 1.0, (3000, 33)));"
         "m = f[rng.permutation(3000)] + rng.normal(0, 0.01, (3000, 33));"
         "xy = rng.uniform(-100, 100, (3000, 2));"
@@ -164,7 +164,7 @@ def test_matcher_gives_the_same_pairs_on_any_number_of_threads(thread_outputs, n
 def test_the_matcher_multiplies_on_one_blas_thread(monkeypatch):
     """The matcher's block products run with numpy's BLAS held to one thread (faster on blocks this
     small), and the limit is lifted afterwards."""
-    from helpers import matching
+    from helpers.slam.registration import matching
     from helpers.threads import BLAS
 
     seen = []
@@ -192,7 +192,7 @@ def test_the_matcher_shares_its_blocks_between_threads(monkeypatch):
     and the pairs are those of one thread."""
     import threading
 
-    from helpers import matching
+    from helpers.slam.registration import matching
 
     rng = np.random.default_rng(5)
     fixed = normalise_descriptors(rng.gamma(0.5, 1.0, (1000, 33)))

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.metrics import ate, rpe
+from helpers.quality.metrics import ate, rpe
 
 
 def _circle(n=12, radius=10.0):

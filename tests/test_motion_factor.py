@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import Config, PoseGraphConfig
+from helpers.config.tables import Config, PoseGraphConfig
 from helpers.errors import SlamError
-from helpers.factors import (
+from helpers.slam.graph.factors import (
     BetweenFactor,
     ConstantVelocityFactor,
     FactorContext,
@@ -19,9 +19,9 @@ from helpers.factors import (
     motion_factors,
     pose3,
 )
-from helpers.odometry import OdometryResult
-from helpers.posegraph import PoseGraph
-from helpers.slam import build_pose_graph
+from helpers.slam.graph.optimizer import PoseGraph
+from helpers.slam.odometry import OdometryResult
+from helpers.slam.slam import build_pose_graph
 
 NODES = 120
 STEP = 6.0  # m between nodes, as the default flight's accepted scans

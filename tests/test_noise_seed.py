@@ -4,12 +4,12 @@ environment."""
 
 import pytest
 
-from helpers import pipeline
 from helpers.__main__ import main
-from helpers.config import NOISE_SEED_VARIABLE, Config, SensorConfig, noise_seed_from_environment
-from helpers.configfile import load_config
-from helpers.dataset import create_dataset
+from helpers.cli import cache as pipeline
+from helpers.config.files import load_config
+from helpers.config.tables import NOISE_SEED_VARIABLE, Config, SensorConfig, noise_seed_from_environment
 from helpers.errors import SlamError
+from helpers.sim.dataset import create_dataset
 
 
 def test_the_configuration_never_reads_the_environment(monkeypatch):

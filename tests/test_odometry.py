@@ -3,12 +3,11 @@
 import numpy as np
 import pytest
 
-from helpers.config import Config, noise_seed_from_environment
+from helpers.config.tables import Config, noise_seed_from_environment
 from helpers.errors import SlamError
 from helpers.geometry import rotation_angle_deg
-from helpers.icp import WEAK_CONSTRAINT
-from helpers.metrics import ate, rpe
-from helpers.odometry import (
+from helpers.quality.metrics import ate, rpe
+from helpers.slam.odometry import (
     Frame,
     local_map,
     predicted_motion,
@@ -17,6 +16,7 @@ from helpers.odometry import (
     run_odometry,
     staleness,
 )
+from helpers.slam.registration.icp import WEAK_CONSTRAINT
 
 WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
 
@@ -147,7 +147,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     and keep the answer that pairs more, near the truth. With the overlap crop,
     made at the last motion, ICP from the fit pairs too little to fit well, and
     the RMSE check restarts it first."""
-    import helpers.frames as frames
+    import helpers.slam.registration.pair as frames
 
     config = Config().with_values(registration={"overlap_crop": crop})
     fixed_id, moving_id = 30, 33
@@ -174,7 +174,7 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     see that the pairs pin nothing along the plane and keep the last motion
     (the flight's momentum) instead of the jump."""
     import helpers
-    import helpers.frames as frames
+    import helpers.slam.registration.pair as frames
 
     data = helpers.create_dataset(*flat_plane)
     config = Config()
@@ -195,7 +195,7 @@ def test_on_repeating_ground_a_fit_one_ridge_off_loses_to_the_last_motion(grid_t
     from the last motion too and, the fit being no better, keep the flight's
     momentum: a drone does not jump 6 m sideways between two scans."""
     import helpers
-    import helpers.frames as frames
+    import helpers.slam.registration.pair as frames
 
     def ridges(x, y):
         return 100.0 + 1.5 * np.sin(2 * np.pi * y / 6.0) + 2.0 * np.sin(2 * np.pi * x / 23.0)
@@ -224,7 +224,7 @@ def test_a_fit_turned_half_round_loses_to_the_last_motion(flat_plane, monkeypatc
     the turned scan fits as well as the true one; 150 m above Autzen the turned fit kept fitting no better,
     and ``tests/test_step_bias.py`` has that flight.)"""
     import helpers
-    import helpers.frames as frames
+    import helpers.slam.registration.pair as frames
 
     data = helpers.create_dataset(*flat_plane)
     config = Config()
@@ -244,7 +244,7 @@ def test_a_sharp_turn_the_guess_lags_behind_is_confirmed_not_doubted(monkeypatch
     recorded (20 of 45 steps of a tight test loop were before this), and the fit's answer stands."""
     from test_step_bias import STRIPS, turned_strips, yawed
 
-    import helpers.frames as frames
+    import helpers.slam.registration.pair as frames
 
     config = STRIPS
     moving_points, fixed_points, truth = turned_strips(10.0)
@@ -342,7 +342,7 @@ def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan(benchmark
     overlap slides 2.9 m along the track, from the fit and from the true last motion alike (constraint 0.0065,
     just above the weak bar): the crop leaves a strip too short to pin it. A drone does not jump: ICP on the
     whole scan from the last motion lands within the jump limits of it and is kept."""
-    from helpers.preparation import describe
+    from helpers.slam.preprocess import describe
 
     data, config = benchmark_flight("sparse-150", swing=0.3)
     assert config.registration.overlap_crop and config.registration.motion_guard
@@ -396,18 +396,18 @@ def test_run_odometry_reading_ahead_is_the_odometry_of_scans_prepared_in_turn(fl
     the same poses, steps and matches to the bit as an Odometry fed scans prepared one by one."""
     import threading
 
-    import helpers.odometry
-    from helpers.odometry import Odometry
+    import helpers.slam.odometry
+    from helpers.slam.odometry import Odometry
 
     flight = flight_over(slice(0, 15))  # accepted: 0, 3, 6, 9, 12
     config = Config()
-    names, real = [], helpers.odometry.prepare_scan
+    names, real = [], helpers.slam.odometry.prepare_scan
 
     def spy(scan, index, cfg):
         names.append(threading.current_thread().name)
         return real(scan, index, cfg)
 
-    monkeypatch.setattr(helpers.odometry, "prepare_scan", spy)
+    monkeypatch.setattr(helpers.slam.odometry, "prepare_scan", spy)
     ahead = run_odometry(flight, config=config)
     assert len(names) == 5 and all(name.startswith("helpers-read-ahead") for name in names)
     in_turn = Odometry(config, flight.poses[0])
@@ -421,7 +421,7 @@ def test_run_odometry_reading_ahead_is_the_odometry_of_scans_prepared_in_turn(fl
 def test_with_a_last_motion_the_matches_stay_inside_the_gate_and_the_step_lands_on_the_truth(flight):
     """Every match of a gated step pairs points whose cells touch, once the moving point is put where
     the last motion (half a metre off) says; the step is as right as without the gate."""
-    from helpers.frames import gate
+    from helpers.slam.registration.pair import gate
 
     config = Config()
     fixed, moving = (prepare(flight.scans[k], config) for k in (30, 33))

@@ -20,14 +20,15 @@ import numpy as np
 import pytest
 
 import helpers
-import helpers.configfile
-import helpers.dataset
+import helpers.cli.outputs
+import helpers.config.files
 import helpers.outdir
+import helpers.paths
+import helpers.sim.dataset
 from helpers.__main__ import main
-from helpers.dataset import MARKER as DATASET_MARKER
+from helpers.cli.outputs import DATASET_MARKER, RUN_MARKER
 from helpers.errors import SlamError
 from helpers.outdir import atomic_dir
-from helpers.output import MARKER as RUN_MARKER
 from helpers.site import build as site_module
 
 REPO = Path(__file__).resolve().parents[1]
@@ -134,7 +135,7 @@ def test_a_bad_place_is_refused_before_any_work(tmp_path, monkeypatch, capsys, o
     def work(*args, **kwargs):
         raise AssertionError("the work started before the output place was checked")
 
-    monkeypatch.setattr(helpers.dataset, "create_dataset", work)
+    monkeypatch.setattr(helpers.sim.dataset, "create_dataset", work)
     monkeypatch.setattr(site_module, "_add_notebook", work)
     root = tmp_path / "place"
     root.mkdir()
@@ -146,7 +147,7 @@ def test_a_bad_place_is_refused_before_any_work(tmp_path, monkeypatch, capsys, o
 
 
 def test_a_read_only_parent_is_refused_before_any_work(capsys, monkeypatch, tiny_flight):
-    monkeypatch.setattr(helpers.dataset, "create_dataset", lambda *a, **k: pytest.fail("computed first"))
+    monkeypatch.setattr(helpers.sim.dataset, "create_dataset", lambda *a, **k: pytest.fail("computed first"))
     root = Path(tempfile.mkdtemp(prefix="helpers-test-"))  # in /tmp: a folder nobody may enter
     try:
         root.chmod(0o755)
@@ -198,7 +199,7 @@ def test_an_old_site_is_left_for_the_user_to_delete(tmp_path, one_notebook):
 
 
 def test_a_full_disk_ends_in_one_error_line(tmp_path, capsys, monkeypatch, tiny_flight):
-    real_write = helpers.dataset.write_ply
+    real_write = helpers.cli.outputs.write_ply
     calls = []
 
     def full_disk(path, points):
@@ -207,7 +208,7 @@ def test_a_full_disk_ends_in_one_error_line(tmp_path, capsys, monkeypatch, tiny_
             raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
         real_write(path, points)
 
-    monkeypatch.setattr(helpers.dataset, "write_ply", full_disk)
+    monkeypatch.setattr(helpers.cli.outputs, "write_ply", full_disk)
     root = tmp_path / "place"
     root.mkdir()
     out = root / "new" / "ds"
@@ -244,16 +245,20 @@ def test_an_out_through_dot_dot_is_the_folder_it_names(tmp_path, capsys, tiny_fl
     assert list((tmp_path / "place").iterdir()) == [x]
 
 
-def test_a_failed_swap_puts_the_previous_output_back(tmp_path, tiny_dataset, monkeypatch):
+@pytest.mark.parametrize("exchange", ["refused", "unavailable"])
+def test_a_failed_swap_puts_the_previous_output_back(tmp_path, tiny_dataset, monkeypatch, exchange):
+    """Where the system exchanges the two folders in one step and refuses, nothing moved; where it cannot, the
+    second of two renames fails and the first is undone."""
     out = helpers.write_dataset(tiny_dataset, tmp_path / "ds")
     before = _snapshot(out)
     real_rename = os.rename
 
-    def busy(source, target):
-        if ".helpers-partial." in str(source):
-            raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), str(target))
+    def busy(source, target=None):
+        if target is None or ".helpers-partial." in str(source):
+            raise OSError(errno.EBUSY, os.strerror(errno.EBUSY), str(target or out))
         real_rename(source, target)
 
+    monkeypatch.setattr(helpers.outdir, "_exchange", busy if exchange == "refused" else lambda a, b: False)
     monkeypatch.setattr(helpers.outdir.os, "rename", busy)
     with pytest.raises(SlamError, match=r"^cannot write output folder .*/ds: Device or resource busy$"):
         helpers.write_dataset(tiny_dataset, out)
@@ -265,7 +270,7 @@ def test_any_oserror_from_a_command_is_one_error_line(capsys, monkeypatch, tmp_p
     def unreadable(path):
         raise PermissionError(errno.EACCES, os.strerror(errno.EACCES), "config.toml")
 
-    monkeypatch.setattr(helpers.configfile, "load_config", unreadable)
+    monkeypatch.setattr(helpers.config.files, "load_config", unreadable)
     line = _one_error_line(capsys, ["dataset", "--out", str(tmp_path / "ds")])
     assert line == "error: config.toml: Permission denied"
 
@@ -340,7 +345,7 @@ def test_the_temporary_folder_of_a_killed_writer_goes_at_the_next_write(tmp_path
     left = _hidden(place)
     assert len(left) == 1 and f".{writer.pid}." in left[0]
     # What is not a dead writer's of this host stays: a user's folder, another host's, a live process's.
-    live = f".out.helpers-partial.{helpers.outdir._host()}.{os.getpid()}.0123abcd"
+    live = f".out.helpers-partial.{helpers.paths.host_name()}.{os.getpid()}.0123abcd"
     keep = [".out.notes", f".out.helpers-partial.otherhost.{writer.pid}.0123abcd", live, ".out.helpers-partial.x"]
     for name in keep:
         (place / name).mkdir()

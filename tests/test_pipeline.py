@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 
 import helpers
-from helpers.config import Config
-from helpers.configfile import config_to_dict, config_to_toml
-from helpers.evaluation import grade_loops, map_errors, run_metrics
-from helpers.health import assess
-from helpers.output import write_run
-from helpers.pipeline import Edge, Slam, build_pose_graph, run_slam
-from helpers.trajectory import read_tum
+from helpers.cli.outputs import write_run
+from helpers.config.files import config_to_dict, config_to_toml
+from helpers.config.tables import Config
+from helpers.quality.evaluation import grade_loops, map_errors, run_metrics
+from helpers.quality.trust import assess
+from helpers.sim.tum import read_tum
+from helpers.slam.pipeline import Edge, Slam, build_pose_graph, run_slam
 
 SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3))  # a short loop has few submaps
 
@@ -211,7 +211,8 @@ def test_an_edge_spanning_k_steps_has_k_times_the_sigmas(weights, expected_x):
     """Two 1 m steps and an edge over both that says 2.3 m. With sigmas s,
     s and 2s (icp weights) least squares puts node 2 at 2.1 m; with equal
     weights (the reference's identity) at 2.2 m."""
-    odometry = SimpleNamespace(poses=np.stack([_shift(0.0), _shift(1.0), _shift(2.0)]), relative=[_shift(1.0)] * 2)
+    steps = [_shift(1.0)] * 2
+    odometry = SimpleNamespace(poses=np.stack([_shift(0.0), _shift(1.0), _shift(2.0)]), relative=steps, information=[])
     graph = build_pose_graph(
         odometry,
         [Edge(0, 2, _shift(2.3), surface_rmse=0.1)],
@@ -247,19 +248,19 @@ def test_slam_driven_scan_by_scan_from_a_given_odometry_is_the_same_run(short_lo
 def test_each_scan_is_downsampled_and_made_ready_for_icp_once(flight_over, monkeypatch):
     """One scan, one preparation: every accepted scan is grid-averaged once on each grid (features, ICP)
     and its ICP cloud made ready once, then shared by the odometry and the edges back."""
-    import helpers.icp
-    import helpers.preparation
+    import helpers.slam.preprocess
+    import helpers.slam.registration.icp
 
     flight = flight_over(slice(0, 24))  # 8 accepted scans: each one is the fixed cloud of 3 later registrations
     prepared, averaged = [], []
-    for module in (helpers.preparation, helpers.icp):
+    for module in (helpers.slam.preprocess, helpers.slam.registration.icp):
         real = module.icp_cloud
         monkeypatch.setattr(
             module, "icp_cloud", lambda points, *a, real=real: prepared.append(id(points)) or real(points, *a)
         )
-    real_average = helpers.preparation.grid_average
+    real_average = helpers.slam.preprocess.grid_average
     counted = lambda p, step: averaged.append(step) or real_average(p, step)  # noqa: E731
-    monkeypatch.setattr(helpers.preparation, "grid_average", counted)
+    monkeypatch.setattr(helpers.slam.preprocess, "grid_average", counted)
     result = run_slam(flight)
     assert len(result.indices) == 8 and result.edges_back_tried > 0
     assert sorted(prepared) == sorted(id(cloud) for cloud in result.clouds)  # each cloud once, and no other
@@ -273,11 +274,11 @@ def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flig
     stops the run at that scan, after the scans before it, with the message it gets in place."""
     import threading
 
-    import helpers.pipeline
+    import helpers.slam.pipeline
 
     flight = flight_over(slice(0, 12))  # accepted: 0, 3, 6, 9
     read, processed = [], []
-    real_prepare, real_process = helpers.pipeline.prepare_scan, Slam.process
+    real_prepare, real_process = helpers.slam.pipeline.prepare_scan, Slam.process
 
     def spy_prepare(scan, index, config):
         read.append((index, threading.current_thread().name))
@@ -287,7 +288,7 @@ def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flig
         processed.append(index)
         return real_process(self, scan, index, prepared)
 
-    monkeypatch.setattr(helpers.pipeline, "prepare_scan", spy_prepare)
+    monkeypatch.setattr(helpers.slam.pipeline, "prepare_scan", spy_prepare)
     monkeypatch.setattr(Slam, "process", spy_process)
     result = run_slam(flight)
     assert result.indices.tolist() == processed == [0, 3, 6, 9]

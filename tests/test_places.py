@@ -6,8 +6,8 @@ import dataclasses
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from helpers.config import Config
-from helpers.places import AGREE_DEG, AGREE_M, CONFIRM_NODES, PlaceRecognition
+from helpers.config.tables import Config
+from helpers.slam.loops.places import AGREE_DEG, AGREE_M, CONFIRM_NODES, PlaceRecognition
 
 
 def turned(yaw_deg: float, xyz=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -40,8 +40,8 @@ def test_after_a_blind_stretch_the_revisit_a_missed_turn_hid_is_recognised(short
     # of an early turn taken out there: the flight comes back to its start some 40 m and 45 degrees from where
     # the odometry puts it, where the loop search (held at the odometry) finds nothing. Place recognition finds
     # the start by its descriptors, and the pose graph bends the blind steps to the loops.
-    from helpers.evaluation import grade_loops, run_metrics
-    from helpers.pipeline import run_slam
+    from helpers.quality.evaluation import grade_loops, run_metrics
+    from helpers.slam.pipeline import run_slam
 
     config = Config().with_values(
         loop_closure={"sub_map_thresh": 3, "search": "uncertainty", "skip_after_loop": 0},

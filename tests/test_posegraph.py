@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import PoseGraphConfig
+from helpers.config.tables import PoseGraphConfig
 from helpers.errors import SlamError
-from helpers.posegraph import PoseGraph, information_from_sigmas
+from helpers.slam.graph.optimizer import PoseGraph, information_from_sigmas
 
 RING_NODES = 24
 RING_RADIUS = 50.0  # m
@@ -239,7 +239,7 @@ def test_position_sigmas_add_up_along_a_chain_and_meet_a_fix_as_gaussians_do():
     """A straight chain of 2 m steps, each known to 0.1 m on every axis and to a micro-radian in rotation, from
     an anchored first node: node k's position variance is 3 k 0.1² (three axes). A 0.3 m fix on the last node
     fuses with it as two Gaussians do, axis by axis."""
-    from helpers.factors import PositionFactor
+    from helpers.slam.graph.factors import PositionFactor
 
     sigma, fix_sigma, n = 0.1, 0.3, 12
     step_sigmas = [sigma] * 3 + [1e-6] * 3

@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.icp import icp_cloud, icp_rmse, refine_icp
-from helpers.registration import estimate_rigid_msac, kabsch, trials_needed
+from helpers.slam.registration.icp import icp_cloud, icp_rmse, refine_icp
+from helpers.slam.registration.msac import estimate_rigid_msac, kabsch, trials_needed
 
 ICP = {"max_iterations": 30, "tolerance": 1e-6}  # a tight tolerance: these tests want ICP converged
 BACKENDS = ["small_gicp", "open3d"]
@@ -124,7 +124,7 @@ def test_msac_with_many_inliers_stops_early_with_the_same_answer():
 def test_msac_bit_identical_across_thread_counts(thread_outputs):
     script = (
         "import numpy as np, sys; sys.path.insert(0, '.'); from tests.test_registration import _matches_with_outliers;"
-        "from helpers.registration import estimate_rigid_msac;"
+        "from helpers.slam.registration.msac import estimate_rigid_msac;"
         "m, f, _, _ = _matches_with_outliers(seed=11);"
         "T, _ = estimate_rigid_msac(m, f, 1.0, 3000, 0); print(T.tobytes().hex())"
     )
@@ -232,7 +232,7 @@ def test_icp_refuses_bad_input(flight):
     ("yaw", "shift"), [(30.0, [10.0, 0.0, 0.0]), (-20.0, [-6.0, 8.0, 1.0]), (5.0, [0.0, -10.0, 0.0])]
 )
 def test_register_pair_recovers_a_known_transform_on_real_scans(flight, yaw, shift):
-    from helpers.odometry import register_pair
+    from helpers.slam.odometry import register_pair
 
     extra = _transform(yaw, shift)
     i, j = 20, 23  # two accepted scans 6 m apart
@@ -249,7 +249,7 @@ def test_register_pair_recovers_a_known_transform_on_real_scans(flight, yaw, shi
 def test_pairing_says_how_well_the_pairs_pin_a_translation():
     """A plane cannot pin a slide along it (constraint about 0); three faces
     that look three ways pin all of it; the overlap is the share paired."""
-    from helpers.icp import pairing
+    from helpers.slam.registration.icp import pairing
 
     rng = np.random.default_rng(8)
     plane = np.column_stack([rng.uniform(-20, 20, (3000, 2)), rng.normal(0, 0.01, 3000)])
@@ -269,7 +269,7 @@ def test_pairing_says_how_well_the_pairs_pin_a_translation():
 def test_register_pair_with_the_yaw_and_translation_fit_recovers_a_known_transform(flight, yaw, shift):
     """``robust_fit = "msac4"`` through the registration entry point: the coarse fit is a pure yaw and
     translation (no tilt at all, so the 4-DoF fit ran), near the truth, and ICP adds the tilt."""
-    from helpers.odometry import register_pair
+    from helpers.slam.odometry import register_pair
 
     config = Config().with_values(registration={"robust_fit": "msac4"})
     extra = _transform(yaw, shift)
@@ -286,9 +286,9 @@ def test_register_pair_with_the_yaw_and_translation_fit_recovers_a_known_transfo
 
 
 def test_robust_fit_runs_the_fit_the_configuration_names():
-    from helpers.config import RegistrationConfig
-    from helpers.fit4dof import estimate_yaw_msac
-    from helpers.registration import robust_fit
+    from helpers.config.tables import RegistrationConfig
+    from helpers.slam.registration.msac_yaw import estimate_yaw_msac
+    from helpers.slam.registration.robust_fit import robust_fit
 
     moving, fixed, truth, outliers = _matches_with_outliers(outlier_fraction=0.5)
     rigid = robust_fit(moving, fixed, RegistrationConfig(max_distance=0.3, robust_fit="msac"))
@@ -301,7 +301,7 @@ def test_robust_fit_runs_the_fit_the_configuration_names():
 
 
 def test_the_yaw_fit_s_trial_cap_gives_up_at_the_rigid_fit_s_inlier_ratio():
-    from helpers.registration import equivalent_trials
+    from helpers.slam.registration.msac import equivalent_trials
 
     # 3000 samples of 3 reach 99 % at w^3 = 1 - 0.01^(1/3000), w = 0.1154; samples of 2 need 344 there.
     assert equivalent_trials(3000, 0.99, 2) == 344
@@ -318,8 +318,8 @@ def test_the_yaw_fit_s_trial_cap_gives_up_at_the_rigid_fit_s_inlier_ratio():
 
 
 def test_the_configuration_refuses_an_unknown_robust_fit():
-    from helpers.config import Config, RegistrationConfig
-    from helpers.configfile import config_from_dict
+    from helpers.config.files import config_from_dict
+    from helpers.config.tables import Config, RegistrationConfig
 
     assert RegistrationConfig().robust_fit == "msac4"  # ours: yaw and translation
     assert Config.reference().registration.robust_fit == "msac"  # the reference's rigid fit one call away

@@ -11,9 +11,9 @@ import pytest
 
 import helpers
 from helpers.__main__ import main
-from helpers.config import Config
+from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.fitting import REFERENCE_HEIGHT, Flight, check_grid_steps, fit_to_flight, flight_of
+from helpers.slam.flight_fit import REFERENCE_HEIGHT, Flight, check_grid_steps, fit_to_flight, flight_of
 
 SHORT_FLIGHT = "x,y\n" + "\n".join(f"{2.0 * i},-120" for i in range(30)) + "\n"  # 30 waypoints of the default loop
 
@@ -139,7 +139,7 @@ def test_the_message_names_the_kind(tmp_path):
 
 def test_a_config_file_with_a_byte_order_mark_is_read(tmp_path):
     """Windows editors write a UTF-8 byte-order mark first; TOML is UTF-8 and the mark is not a statement."""
-    from helpers.configfile import given_keys, load_config
+    from helpers.config.files import given_keys, load_config
 
     path = tmp_path / "bom.toml"
     path.write_bytes(b"\xef\xbb\xbf[sensor]\naltitude = 650.0\n")
@@ -149,7 +149,7 @@ def test_a_config_file_with_a_byte_order_mark_is_read(tmp_path):
 
 def test_a_csv_number_with_an_underscore_is_an_error_not_a_value(tmp_path):
     """Python reads '1_20' as 120; a CSV reader must not."""
-    from helpers.waypoints import read_waypoints
+    from helpers.sim.waypoints import read_waypoints
 
     path = tmp_path / "flight.csv"
     path.write_text("x,y\n0,-120\n1_20,-120\n")
@@ -160,7 +160,7 @@ def test_a_csv_number_with_an_underscore_is_an_error_not_a_value(tmp_path):
 
 
 def test_a_config_file_far_larger_than_a_configuration_is_refused_unread(tmp_path, capsys):
-    from helpers.configfile import MAX_CONFIG_BYTES
+    from helpers.config.files import MAX_CONFIG_BYTES
 
     path = tmp_path / "huge.toml"
     with open(path, "wb") as f:
@@ -173,7 +173,7 @@ def test_a_config_file_far_larger_than_a_configuration_is_refused_unread(tmp_pat
 
 
 def test_a_csv_larger_than_the_most_waypoints_take_is_refused_unread(tmp_path):
-    from helpers.waypoints import MAX_CSV_BYTES, read_waypoints
+    from helpers.sim.waypoints import MAX_CSV_BYTES, read_waypoints
 
     path = tmp_path / "flight.csv"
     with open(path, "wb") as f:
@@ -256,7 +256,7 @@ def _tile_with_crs(path, geo_unit=None, wkt=None):
 
 def test_a_wkt2_tile_in_feet_is_read_in_feet(tmp_path):
     """The ellipsoid's LENGTHUNIT["metre"] came first and the tile was read as metres, 3.28 times too large."""
-    from helpers.mapio import read_map
+    from helpers.sim.maps import read_map
 
     tile = read_map(_tile_with_crs(tmp_path / "ft.las", wkt=WKT2_FEET))
     assert tile.frame.unit_name == "foot"
@@ -265,7 +265,7 @@ def test_a_wkt2_tile_in_feet_is_read_in_feet(tmp_path):
 
 def test_crs_records_that_disagree_on_the_unit_are_refused(tmp_path):
     """GeoTIFF keys in feet (EPSG 9002) beside a WKT in metres: one is wrong, and which cannot be told."""
-    from helpers.mapio import read_map
+    from helpers.sim.maps import read_map
 
     with pytest.raises(SlamError, match="disagree on its unit: the GeoTIFF keys say foot, the WKT says metre"):
         read_map(_tile_with_crs(tmp_path / "mixed.las", geo_unit=9002, wkt=WKT1_METRES))

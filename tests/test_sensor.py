@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from helpers.config import SensorConfig, noise_seed_from_environment
+from helpers.config.tables import SensorConfig, noise_seed_from_environment
 from helpers.errors import SlamError
-from helpers.scene import GROUND, HeightField
-from helpers.sensor import Surface, cast_scans, check_coverage, poses_from_waypoints, ray_pattern
+from helpers.sim.scene import GROUND, HeightField
+from helpers.sim.sensor import Surface, cast_scans, check_coverage, poses_from_waypoints, ray_pattern
 
 
 def flat_field(height=100.0, half=600.0, cell=5.0):

@@ -1,5 +1,5 @@
-"""Steps as long as the true ones: the overlap crop (helpers.overlap) and, on low flights, the local map
-(helpers.odometry.local_map) on flights whose truth is known.
+"""Steps as long as the true ones: the overlap crop (registration.overlap) and, on low flights, the local map
+(helpers.slam.odometry.local_map) on flights whose truth is known.
 
 ICP fed the whole moving scan pairs its leading edge, which the fixed scan never saw, with the fixed
 scan's edge and comes out short every step, the same way (issue 21). The flights are
@@ -12,11 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers.config import Config
-from helpers.frames import track_frames
-from helpers.odometry import run_odometry
-from helpers.overlap import crop, footprint, inside, overlap
-from helpers.preparation import prepare
+from helpers.config.tables import Config
+from helpers.slam.odometry import run_odometry
+from helpers.slam.preprocess import prepare
+from helpers.slam.registration.overlap import crop, footprint, inside, overlap
+from helpers.slam.registration.pair import track_frames
 
 SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "bench_bias.py"
 # Consecutive accepted scans registered per flight. One step's ratio scatters by 1-2 % (2 m steps at 150 m): 30
@@ -112,8 +112,8 @@ def test_icp_with_the_crop_recovers_a_turned_step(yaw_deg):
 def test_a_close_start_is_cropped_where_it_is_and_registered_once(monkeypatch):
     """Tracking's start is close: ICP crops the moving strip at it and registers once, where a start from the
     robust fit is registered whole, cropped where that put it, and registered again. Both end on the truth."""
-    from helpers.icp_service import IcpService
-    from helpers.overlap import overlap_icp
+    from helpers.slam.registration.icp_service import IcpService
+    from helpers.slam.registration.overlap import overlap_icp
 
     config = STRIPS
     moving_points, fixed_points, T_true = turned_strips(10.0)

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from helpers.errors import SlamError
-from helpers.submaps import SubmapIndex, build_submap, centre_scan_id, scan_ids_of
+from helpers.slam.submaps import SubmapIndex, build_submap, centre_scan_id, scan_ids_of
 
 STEP = 1.2  # m, the reference's alignGridStep
 

@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from helpers.errors import SlamError
-from helpers.scene import default_scene
-from helpers.tiles import low_flight, sparse_tile
+from helpers.sim.scene import default_scene
+from helpers.sim.tiles import low_flight, sparse_tile
 
 
 @pytest.fixture(scope="module")

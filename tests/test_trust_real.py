@@ -2,9 +2,9 @@
 simulator's poses: it must say what the truth says (issue 21's bar for real tiles: trusted exactly when the ATE is
 at most 1 m). Skipped when the tile is not there."""
 
-from helpers.health import MAX_FALLBACK_SHARE, assess
-from helpers.metrics import ate
-from helpers.pipeline import run_slam
+from helpers.quality.metrics import ate
+from helpers.quality.trust import MAX_FALLBACK_SHARE, assess
+from helpers.slam.pipeline import run_slam
 
 REAL_TILE_BAR_M = 1.0  # issue 21: a run over a real tile is to be trusted exactly when its ATE is at most this
 

@@ -5,12 +5,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from helpers.config import PoseGraphConfig
+from helpers.config.tables import PoseGraphConfig
 from helpers.errors import SlamError
-from helpers.factors import Edge
 from helpers.geometry import adjoint
-from helpers.loopsearch import mahalanobis_gate
-from helpers.uncertainty import RelativeUncertainty, edge_information
+from helpers.slam.graph.factors import Edge
+from helpers.slam.loops.search import mahalanobis_gate
+from helpers.slam.loops.uncertainty import RelativeUncertainty, edge_information
 
 SIGMA_M = 0.1
 
@@ -165,8 +165,8 @@ def hairpin(closer, n_out=30):
 
 @pytest.mark.parametrize("search", ["uncertainty", "growth"])
 def test_after_a_loop_the_same_place_waits_skip_after_loop_scans(search):
-    from helpers.config import Config
-    from helpers.loopclosure import LoopCloser
+    from helpers.config.tables import Config
+    from helpers.slam.loops.closer import LoopCloser
 
     def run(skip):
         settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "search": search, "skip_after_loop": skip})
@@ -228,9 +228,9 @@ def test_after_a_loop_the_graph_moves_the_old_places_by_the_weighted_measurement
 
 
 def test_the_uncertainty_search_closes_the_loop_of_a_short_flight(short_loop):
-    from helpers.config import Config
-    from helpers.evaluation import grade_loops, run_metrics
-    from helpers.pipeline import run_slam
+    from helpers.config.tables import Config
+    from helpers.quality.evaluation import grade_loops, run_metrics
+    from helpers.slam.pipeline import run_slam
 
     config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty", "skip_after_loop": 0})
     result = run_slam(short_loop, config)
@@ -248,10 +248,10 @@ def test_with_gnss_the_loop_search_finds_the_revisit_a_missed_turn_hid(short_loo
     # RelativeUncertainty.add_fix), which then looks where they put the flight and closes true loops.
     import dataclasses
 
-    from helpers.config import Config
-    from helpers.evaluation import grade_loops, run_metrics
-    from helpers.gnss import GnssFixes, simulate_gnss
-    from helpers.pipeline import run_slam
+    from helpers.config.tables import Config
+    from helpers.quality.evaluation import grade_loops, run_metrics
+    from helpers.sim.gnss import GnssFixes, simulate_gnss
+    from helpers.slam.pipeline import run_slam
 
     config = Config().with_values(loop_closure={"sub_map_thresh": 3, "search": "uncertainty", "skip_after_loop": 0})
     odometry = run_slam(short_loop, config).odometry
@@ -334,7 +334,7 @@ def test_a_closed_place_is_the_ground_not_one_pass_over_it():
     # Pass A flies submaps 0-9 out along x (centres every 10 m), pass B submaps 10-19 back 1 m beside it. A loop
     # just closed on submap 3 closes submaps 1-5 of pass A (the old track flown since) and, given the centres,
     # pass B's submaps over the same ground (within the 7.9 m radius of one of them), and no others.
-    from helpers.loopsearch import closed_places
+    from helpers.slam.loops.search import closed_places
 
     centres = np.zeros((20, 3))
     centres[:10, 0] = 10.0 * np.arange(10)
@@ -350,7 +350,7 @@ def test_a_place_an_earlier_pass_closed_waits_longer():
     at 140. That place was closed before (by the loop found 70 scans earlier, beyond the 45-scan gap), so its
     wait is window_closed (12 scans, reaching 4 submaps either side) instead of 3; a first closure, or a loop
     whose earlier neighbour lies within the gap (the same pass), keeps the short wait."""
-    from helpers.loopsearch import closed_places
+    from helpers.slam.loops.search import closed_places
 
     third_pass = [Edge(17, 70, np.eye(4)), Edge(70, 140, np.eye(4))]
     assert closed_places(third_pass, 145, 3, 5, window_closed=12, gap=45) == set(range(10, 19))
@@ -366,8 +366,8 @@ def test_a_place_an_earlier_pass_closed_waits_longer():
 def test_a_loop_search_on_a_window_of_the_graph_closes_the_same_loops():
     # The hairpin's way back with a window of 20 nodes: the first revisit is joined to the scan only the long way
     # round (beyond the window), so it is searched on the whole graph; the loops found are the whole graph's.
-    from helpers.config import Config
-    from helpers.loopclosure import LoopCloser
+    from helpers.config.tables import Config
+    from helpers.slam.loops.closer import LoopCloser
 
     def run(window_nodes):
         settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "skip_after_loop": 0})
@@ -420,8 +420,8 @@ def test_after_a_loop_icp_starts_where_the_graph_puts_the_scan():
     odometry, 2 m off; its loop edge tells the graph where the way back lies, and every later query starts
     ICP there: decimetres from the truth after the first loops, centimetres once more have closed, never from
     the odometry's pose 2 m away."""
-    from helpers.config import Config
-    from helpers.loopclosure import LoopCloser
+    from helpers.config.tables import Config
+    from helpers.slam.loops.closer import LoopCloser
 
     settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "search": "uncertainty", "skip_after_loop": 0})
     icp = TrueIcp()

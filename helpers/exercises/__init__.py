@@ -10,25 +10,36 @@ call), prints one line and returns whether the answer holds:
 
 An empty scaffold prints ``not yet``, so the notebooks run as shipped; the
 worked answers are in ``notebooks/solutions/``, which the tests run too.
-One module per notebook: :mod:`.dataset`, :mod:`.registration`, ...
+One module per notebook: :mod:`.dataset`, :mod:`.registration`, ...; the checks
+are imported from here (``from helpers.exercises import check_grid_step``).
 """
 
 from __future__ import annotations
 
+from helpers.exercises.dataset import check_edge_ray, check_scans_seeing
+from helpers.exercises.loops import check_false_loop, check_fixed_radius, check_search_radius, search_graph
+from helpers.exercises.maps import check_aligned_ate, check_median_map_error
+from helpers.exercises.parameters import check_grid_step, check_skip_frames
+from helpers.exercises.registration import check_least_share, check_rotation_angle
+from helpers.exercises.report import report, say, unanswered
+from helpers.exercises.submaps import check_centre_and_reach, check_eligible
 
-def report(ok: bool, correct: str, hint: str) -> bool:
-    """Print the one line of a check and return ``ok``."""
-    print(f"correct: {correct}" if ok else f"not yet: {hint}")
-    return bool(ok)
-
-
-def say(ok: bool, correct: str, hint: str) -> None:
-    """:func:`report`, returning nothing: for a check called as a cell's last
-    line, whose value would show as a second output (a trailing ``;`` does
-    not hide it under nbval)."""
-    report(ok, correct, hint)
-
-
-def unanswered(answer) -> bool:
-    """True when the scaffold still holds its placeholder (``None`` or ``...``)."""
-    return answer is None or answer is Ellipsis
+__all__ = [
+    "check_aligned_ate",
+    "check_centre_and_reach",
+    "check_edge_ray",
+    "check_eligible",
+    "check_false_loop",
+    "check_fixed_radius",
+    "check_grid_step",
+    "check_least_share",
+    "check_median_map_error",
+    "check_rotation_angle",
+    "check_scans_seeing",
+    "check_search_radius",
+    "check_skip_frames",
+    "report",
+    "say",
+    "search_graph",
+    "unanswered",
+]

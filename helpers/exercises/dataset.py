@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..sensor import Surface, ray_pattern
-from . import report, unanswered
+from helpers.exercises.report import report, unanswered
+from helpers.sim.sensor import Surface, ray_pattern
 
 HIT_TOLERANCE_M = 0.05  # a hit point this close to the true one is right
 SPOT_RADIUS_M = 1.5  # a scan sees a spot when one of its returns lands this close (one grid cell of notebook 2)

@@ -10,17 +10,18 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..errors import SlamError
-from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M, is_false_loop, loop_error
-from ..factors import Edge
-from ..loopsearch import distance_flown_since, mahalanobis_gate, radius_after
-from ..submaps import centre_scan_id
-from ..uncertainty import RelativeUncertainty
-from . import report, unanswered
+from helpers.errors import SlamError
+from helpers.exercises.report import report, unanswered
+from helpers.quality.evaluation import loop_error
+from helpers.quality.metrics import FALSE_LOOP_DEG, FALSE_LOOP_M, is_false_loop
+from helpers.slam.graph.factors import Edge
+from helpers.slam.loops.search import distance_flown_since, mahalanobis_gate, radius_after
+from helpers.slam.loops.uncertainty import RelativeUncertainty
+from helpers.slam.submaps import centre_scan_id
 
 
 def search_graph(result, node: int) -> RelativeUncertainty:
-    """The loop search's graph (:class:`helpers.uncertainty.RelativeUncertainty`)
+    """The loop search's graph (:class:`helpers.slam.loops.uncertainty.RelativeUncertainty`)
     as it stood when ``node`` ran its query: the odometry poses and steps (with
     their information) of nodes 0 .. ``node``, the edges back of the earlier nodes and the loop edges
     they closed (a node's own edges back come after its query)."""
@@ -42,8 +43,8 @@ def search_graph(result, node: int) -> RelativeUncertainty:
 def _gate_radius(result, node: int, submap_id: int) -> float:
     """The search radius (m) around submap ``submap_id`` for the query of
     ``node`` under the run's search: with ``search = "growth"``,
-    :func:`helpers.loopsearch.radius_after` the path flown since the submap;
-    with ``"uncertainty"``, the gate of :func:`helpers.loopsearch.mahalanobis_gate`
+    :func:`helpers.slam.loops.search.radius_after` the path flown since the submap;
+    with ``"uncertainty"``, the gate of :func:`helpers.slam.loops.search.mahalanobis_gate`
     with the exact covariance (``gtsam.Marginals``) of the graph of
     :func:`search_graph` held at ``node``. The run itself may reuse a
     covariance computed a few nodes earlier, which errs on the wide side, so
@@ -91,7 +92,7 @@ def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
 def _loop_edge_error(poses_gt, edge) -> tuple[float, float]:
     """How far a loop edge (``i``, ``j``, ``relative``) is from the true
     relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg),
-    as :func:`helpers.evaluation.loop_error` grades it."""
+    as :func:`helpers.quality.evaluation.loop_error` grades it."""
     return loop_error(poses_gt, edge)
 
 
@@ -122,8 +123,8 @@ def _fixed_radius_loops(result, end: int) -> list[int]:
     search radius does not grow (``loop_search_growth = 0``, the reference's
     fixed radius, queried at every scan): the pipeline's own loop closer run
     again on the run's scans and odometry poses."""
-    from ..icp_service import IcpService
-    from ..loopclosure import LoopCloser
+    from helpers.slam.loops.closer import LoopCloser
+    from helpers.slam.registration.icp_service import IcpService
 
     config = result.config
     fixed = replace(config.loop_closure, loop_search_growth=0.0, search="growth", skip_after_loop=0)

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..evaluation import map_errors
-from ..metrics import ate
-from ..registration import kabsch
-from . import report, unanswered
+from helpers.exercises.report import report, unanswered
+from helpers.quality.evaluation import map_errors
+from helpers.quality.metrics import ate
+from helpers.slam.registration.msac import kabsch
 
 NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
 
@@ -29,7 +29,7 @@ def positions(trajectory) -> np.ndarray:
 def _rigid_fit(moving, fixed) -> tuple[np.ndarray, np.ndarray]:
     """The rotation R and translation t that bring the (N, 3) points ``moving``
     closest to ``fixed`` in the least-squares sense (the package's Kabsch,
-    :func:`helpers.registration.kabsch`: by SVD, no scale, never a mirror)."""
+    :func:`helpers.slam.registration.msac.kabsch`: by SVD, no scale, never a mirror)."""
     T_fixed_moving = kabsch(positions(moving), positions(fixed))
     return T_fixed_moving[:3, :3], T_fixed_moving[:3, 3]
 
@@ -52,9 +52,9 @@ def check_aligned_ate(ate_m, estimated, ground_truth) -> bool:
     anchored = ate(_as_poses(est), _as_poses(gt))
     if abs(ate_m - truth) <= ATE_TOLERANCE_M:
         lower = "lower than" if truth < anchored.rmse - ATE_TOLERANCE_M else "the same as"
-        return report(True, f"aligned, the ATE is {lower} the anchored one of helpers.metrics.ate", hint)
+        return report(True, f"aligned, the ATE is {lower} the anchored one of helpers.quality.metrics.ate", hint)
     if abs(ate_m - anchored.rmse) <= ATE_TOLERANCE_M:
-        return report(False, "", "that is the anchored ATE (helpers.metrics.ate): align the trajectories first")
+        return report(False, "", "that is the anchored ATE (helpers.quality.metrics.ate): align the trajectories first")
     rotation, translation = _rigid_fit(est, gt)
     distances = np.linalg.norm(est @ rotation.T + translation - gt, axis=1)
     if abs(ate_m - distances.mean()) <= ATE_TOLERANCE_M:

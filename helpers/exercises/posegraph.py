@@ -3,7 +3,7 @@
 * :func:`check_chain`: the 1-D chain with two loop edges, solved by least
   squares, against the least-squares positions computed here.
 * :func:`check_three_poses`: a three-pose GTSAM graph built factor by factor,
-  against :class:`helpers.posegraph.PoseGraph` fed the same measurements.
+  against :class:`helpers.slam.graph.optimizer.PoseGraph` fed the same measurements.
 * :func:`check_loop_kernel`: one robust noise model for every loop edge, a
   wrong one among them, judged by the trajectory error against the true poses.
 
@@ -16,12 +16,12 @@ from __future__ import annotations
 import gtsam
 import numpy as np
 
-from ..metrics import ate
-from ..posegraph import PoseGraph, information_from_sigmas
-from . import report, unanswered
+from helpers.exercises.report import report, unanswered
+from helpers.quality.metrics import ate
+from helpers.slam.graph.information import SWAP_ROTATION_TRANSLATION
+from helpers.slam.graph.optimizer import PoseGraph, information_from_sigmas
 
 NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
-_TRANSLATION_FIRST = np.array([3, 4, 5, 0, 1, 2])  # GTSAM's rotation-first sigmas -> x y z rx ry rz
 
 
 def chain_closed_form(steps, loop, sigma_odometry: float, sigma_loop: float, start: float = 0.0) -> np.ndarray:
@@ -95,7 +95,7 @@ def check_three_poses(answer, step_1, step_2, loop, odometry_sigmas, loop_sigmas
     poses) of nodes 0, 1, 2: node 0 held at the identity, odometry edges
     ``step_1`` (0 -> 1) and ``step_2`` (1 -> 2), and a loop edge ``loop``
     (0 -> 2). Sigmas are in GTSAM's order: three rotations (rad), then x y z (m).
-    The expected poses come from :class:`helpers.posegraph.PoseGraph`."""
+    The expected poses come from :class:`helpers.slam.graph.optimizer.PoseGraph`."""
     hint = "the graph needs a prior on node 0, the two steps and the loop edge, each with its own noise model"
     if unanswered(answer):
         return report(False, "", NO_ANSWER)
@@ -105,12 +105,14 @@ def check_three_poses(answer, step_1, step_2, loop, odometry_sigmas, loop_sigmas
         return report(False, "", "pass the gtsam.Values the optimiser returns, with keys 0, 1 and 2")
     if poses.shape != (3, 4, 4):
         return report(False, "", f"expected three 4 x 4 poses, got an array of shape {poses.shape}")
-    odometry = np.asarray(odometry_sigmas, dtype=float)[_TRANSLATION_FIRST]
+    odometry = np.asarray(odometry_sigmas, dtype=float)[SWAP_ROTATION_TRANSLATION]
     graph = PoseGraph()
     graph.add_node(np.eye(4))
     graph.append(_matrix(step_1), odometry)
     graph.append(_matrix(step_2), odometry)
-    graph.add_loop(0, 2, _matrix(loop), information_from_sigmas(np.asarray(loop_sigmas, float)[_TRANSLATION_FIRST]))
+    graph.add_loop(
+        0, 2, _matrix(loop), information_from_sigmas(np.asarray(loop_sigmas, float)[SWAP_ROTATION_TRANSLATION])
+    )
     expected = graph.optimize().poses
     moved = np.linalg.norm(poses[:, :3, 3] - expected[:, :3, 3], axis=1).max()
     cosine = (np.trace(np.transpose(poses[:, :3, :3], (0, 2, 1)) @ expected[:, :3, :3], axis1=1, axis2=2) - 1) / 2

@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from ..geometry import rotation_angle_deg
-from ..registration import SAMPLE_SIZE
-from . import say, unanswered
+from helpers.exercises.report import say, unanswered
+from helpers.geometry import rotation_angle_deg
+from helpers.slam.registration.msac import SAMPLE_SIZE
 
 
 def _rotations(count: int, seed: int = 0) -> np.ndarray:

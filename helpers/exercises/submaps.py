@@ -10,8 +10,8 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import loopclosure as loop_rules
-from . import report, unanswered
+from helpers.exercises.report import report, unanswered
+from helpers.slam.loops import closer as loop_rules
 
 
 def _submap_reach(submap) -> tuple[np.ndarray, float]:
@@ -42,7 +42,7 @@ def check_centre_and_reach(result, submap_id: int, centre, reach) -> bool:
 
 def _eligible_submaps(result, node: int, sub_map_thresh: int) -> np.ndarray:
     """The submaps a loop query at ``node`` may search, by the loop closer's
-    own rule (:func:`helpers.loopclosure.eligible_submaps`)."""
+    own rule (:func:`helpers.slam.loops.closer.eligible_submaps`)."""
     built = [s for s in result.submaps.submaps if s.scan_ids[-1] <= node]  # the submaps that exist at ``node``
     settings = replace(result.config.loop_closure, sub_map_thresh=sub_map_thresh)
     return np.arange(loop_rules.eligible_submaps(len(built), settings))

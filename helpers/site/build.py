@@ -28,11 +28,11 @@ import warnings
 from pathlib import Path
 from unittest import mock
 
-from .. import outdir
-from ..errors import SlamError
-from ..viz.display import KERNEL_ENVIRONMENT
-from . import cells
-from .landing import RESULT_PICTURE, SOLUTIONS, TITLE, index_page
+from helpers import outdir
+from helpers.errors import SlamError
+from helpers.site import cells
+from helpers.site.landing import RESULT_PICTURE, SOLUTIONS, TITLE, index_page
+from helpers.viz.display import KERNEL_ENVIRONMENT
 
 log = logging.getLogger(__name__)
 NOTEBOOKS = Path(__file__).resolve().parents[2] / "notebooks"  # the checkout's: notebooks are not installed

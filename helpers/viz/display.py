@@ -10,7 +10,7 @@ yourself (e.g. ``vtkEGLRenderWindow``) to choose another back end.
 A notebook kernel should start with :data:`KERNEL_ENVIRONMENT` (the site
 builder and nbval start theirs so): Open3D's web visualiser, which needs a
 browser connection and prints a banner in every notebook, is switched off
-when Open3D is imported, which importing ``helpers.dataset`` does. In
+when Open3D is imported, which importing ``helpers.sim.dataset`` does. In
 JupyterLab, start it so: ``OPEN3D_DISABLE_WEB_VISUALIZER=true jupyter lab``.
 
 The big 3-D views of the notebooks (:func:`helpers.viz.render.explore`) are
@@ -34,7 +34,7 @@ VIEW_MODES = ("auto", "static")
 # starve numpy's (registration 13 % slower on 2 cores); it must be set before Open3D loads.
 KERNEL_ENVIRONMENT = {
     "OPEN3D_DISABLE_WEB_VISUALIZER": "true",
-    "OMP_WAIT_POLICY": "PASSIVE",
+    "OMP_WAIT_POLICY": "passive",
     VIEW_MODE_VARIABLE: "static",
 }
 
@@ -47,7 +47,7 @@ def use_offscreen_vtk() -> None:
 
 def view_mode() -> str:
     """``HELPERS_3D``: ``auto`` (the default) or ``static``."""
-    from ..errors import SlamError
+    from helpers.errors import SlamError
 
     mode = os.environ.get(VIEW_MODE_VARIABLE, "auto").strip().lower() or "auto"
     if mode not in VIEW_MODES:

@@ -5,7 +5,7 @@ matplotlib figure, or an RGB array for the PyVista views; a notebook shows
 it with :func:`helpers.viz.render.show_figure` or :func:`helpers.viz.render.show`.
 """
 
-from .graph_figures import (
+from helpers.viz.graph_figures import (
     bad_edge_figure,
     kernels_figure,
     loop_weights_figure,
@@ -13,7 +13,7 @@ from .graph_figures import (
     position_errors_figure,
     trajectories_figure,
 )
-from .loop_figures import (
+from helpers.viz.loop_figures import (
     candidates_figure,
     loop_errors_figure,
     overlap_rounds_figure,
@@ -23,9 +23,9 @@ from .loop_figures import (
     rmse_offsets_figure,
     search_radius_figure,
 )
-from .loop_search import query_search, revisits
-from .style import WINDOW
-from .submap_figures import recent_rule_figure, submap_centres_figure, submap_merge_figure, submap_panels
+from helpers.viz.loop_search import query_search, true_revisits
+from helpers.viz.style import WINDOW
+from helpers.viz.submap_figures import recent_rule_figure, submap_centres_figure, submap_merge_figure, submap_panels
 
 __all__ = [
     "WINDOW",
@@ -42,11 +42,11 @@ __all__ = [
     "query_figure",
     "query_search",
     "recent_rule_figure",
-    "revisits",
     "rmse_offsets_figure",
     "search_radius_figure",
     "submap_centres_figure",
     "submap_merge_figure",
     "submap_panels",
     "trajectories_figure",
+    "true_revisits",
 ]

@@ -5,21 +5,8 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
-from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from .style import COLORS, FIGURE_WIDTH, grid, inset_zoom, segments, xy_of
-
-
-def scale_bar(axis, width_m: float) -> None:
-    """A bar of a round length (1, 2 or 5 times a power of ten metres, about a
-    quarter of ``width_m``) in the lower left corner of a top view, so that a
-    zoom without ticks still shows its scale."""
-    power = 10 ** np.floor(np.log10(width_m / 4))
-    length = max(m * power for m in (1, 2, 5) if m * power <= width_m / 3)
-    label = f"{length:g} m"
-    bar = AnchoredSizeBar(axis.transData, length, label, "lower left", frameon=False, size_vertical=0, pad=0.4)
-    bar.size_bar.get_children()[0].set(linewidth=2.5)
-    axis.add_artist(bar)
+from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, inset_zoom, scale_bar, segments, xy_of
 
 
 def zoom_with_scale(ax, draw, window, at) -> None:

@@ -8,8 +8,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse
 
-from .graph_figures import zoom_with_scale
-from .style import COLORS, FIGURE_WIDTH, grid, xy_of
+from helpers.viz.graph_figures import zoom_with_scale
+from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, xy_of
 
 # One colour per run or stage of notebook 8's graph: the shared odometry red and optimised blue first, then
 # colours no other notebook gives a meaning (purple is the reference's run, orange the loop edges).

@@ -22,9 +22,9 @@ from dataclasses import dataclass
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..geometry import transform_points
-from .player import offline_player
-from .style import COLORS, GREY, grid, xy_of
+from helpers.geometry import transform_points
+from helpers.viz.player import offline_player
+from helpers.viz.style import COLORS, GREY, grid, xy_of
 
 
 @dataclass(frozen=True)
@@ -39,7 +39,7 @@ class Frame:
 
 
 class LiveView:
-    """Record :class:`helpers.slam.Step` after :class:`helpers.slam.Step` and
+    """Record :class:`helpers.slam.slam.Step` after :class:`helpers.slam.slam.Step` and
     show them as a top view that updates in place.
 
     ``truth``: (N, 4, 4) or (N, 2+) true poses of the flight, drawn faint.
@@ -121,7 +121,7 @@ class LiveView:
     def _redraw(self) -> None:
         from IPython.display import display
 
-        from .render import show_figure
+        from helpers.viz.render import show_figure
 
         image = show_figure(self.figure())
         if self.handle is None:

@@ -6,9 +6,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
 
-from ..evaluation import FALSE_LOOP_DEG, FALSE_LOOP_M
-from ..geometry import transform_points
-from .style import COLORS, FIGURE_WIDTH, GREY, LIGHT, grid, xy_of
+from helpers.geometry import transform_points
+from helpers.quality.metrics import FALSE_LOOP_DEG, FALSE_LOOP_M
+from helpers.viz.style import COLORS, FIGURE_WIDTH, GREY, LIGHT, grid, xy_of
 
 
 def candidates_figure(

@@ -1,20 +1,20 @@
 """What the loop queries of a run searched, in arrays for notebook 5's figures
 (:mod:`helpers.viz.loop_figures` draws them): read from the run's own
-records, with the loop closer's own rules (:mod:`helpers.loopclosure`).
+records, with the loop closer's own rules (:mod:`helpers.slam.loops.closer`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..errors import SlamError
-from ..loopclosure import distance_flown_since, eligible_submaps
-from ..submaps import centre_scan_id
+from helpers.errors import SlamError
+from helpers.slam.loops.closer import distance_flown_since, eligible_submaps
+from helpers.slam.submaps import centre_scan_id
 
 
 def query_search(result, node: int, poses_gt) -> dict:
     """What the loop query of ``node`` saw, as the pipeline recorded it
-    (:class:`helpers.pipeline.LoopQuery`): the submap centres that existed
+    (:class:`helpers.slam.pipeline.LoopQuery`): the submap centres that existed
     then (odometry frame), how many were eligible, each one's search
     radius, the submaps registered by ICP (nearest first) and those matched;
     with the scan's odometry and true positions (``poses_gt``: (K, 4, 4), the
@@ -38,7 +38,7 @@ def query_search(result, node: int, poses_gt) -> dict:
     }
 
 
-def revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
+def true_revisits(result, poses_gt, max_true_distance: float = 10.0) -> dict:
     """Every node that truly flies over an eligible old submap (true centre
     within ``max_true_distance`` m; ``poses_gt``: (K, 4, 4), the true poses of
     the nodes): the distance flown since that submap, how far away it truly

@@ -6,9 +6,9 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..evaluation import run_metrics
-from ..metrics import ate, rpe
-from .style import COLORS, FIGURE_WIDTH, grid, xy_of
+from helpers.quality.evaluation import run_metrics
+from helpers.quality.metrics import ate, rpe
+from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, xy_of
 
 
 def comparison_rows(runs: dict) -> list[tuple[str, str, dict]]:

@@ -8,8 +8,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle, Polygon
 
-from ..config import REFERENCE_WORKFLOW, STAGE_TABLES, Config, describe
-from .style import COLORS, FIGURE_WIDTH, HEIGHT_CMAP, grid
+from helpers.config.tables import REFERENCE_WORKFLOW, STAGE_TABLES, Config, describe
+from helpers.viz.style import COLORS, FIGURE_WIDTH, HEIGHT_CMAP, grid
 
 MATCH_COLORS = {"inlier": "#6a3d9a", "outlier": "#b0b0b0"}  # purple: kept by the robust fit; grey: rejected
 CORRECT_COLORS = {"correct": "#6a3d9a", "wrong": "#d0d0d0"}  # the same idea, judged by the ground truth
@@ -44,7 +44,7 @@ def parameter_table(config: Config | None = None) -> str:
     """Every SLAM parameter as a Markdown table, stage by stage as the
     configuration nests them: name, value, where the default comes from
     (:func:`parameter_origin`) and meaning, all read from the configuration's
-    own fields and :data:`helpers.config.REFERENCE_WORKFLOW`."""
+    own fields and :data:`helpers.config.tables.REFERENCE_WORKFLOW`."""
     config = config or Config()
     lines = ["| stage | parameter | default | where it comes from | meaning |", "|---|---|---|---|---|"]
     for table in STAGE_TABLES:

@@ -10,7 +10,7 @@ import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from .style import HEIGHT_CMAP
+from helpers.viz.style import HEIGHT_CMAP
 
 # Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
 # blank offline; these characters need no font download.

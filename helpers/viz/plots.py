@@ -1,6 +1,6 @@
 """The figures of notebooks 2 (parameters), 3 (registration) and 4's odometry, under one name."""
 
-from .parameter_figures import (
+from helpers.viz.parameter_figures import (
     descriptor_distance_figure,
     footprints_figure,
     grid_steps_figure,
@@ -9,7 +9,7 @@ from .parameter_figures import (
     parameter_table,
     trials_formula_figure,
 )
-from .registration_figures import (
+from helpers.viz.registration_figures import (
     clouds_figure,
     darboux_figure,
     descriptor_figure,
@@ -18,8 +18,8 @@ from .registration_figures import (
     profile_figure,
     surface_error_figure,
 )
-from .submap_figures import step_errors_figure, trajectory_figure
-from .sweep_figures import matching_figure, neighbors_figure, skip_frames_figure, trials_figure
+from helpers.viz.submap_figures import step_errors_figure, trajectory_figure
+from helpers.viz.sweep_figures import matching_figure, neighbors_figure, skip_frames_figure, trials_figure
 
 __all__ = [
     "clouds_figure",

@@ -11,9 +11,9 @@ from matplotlib.legend_handler import HandlerTuple
 from matplotlib.patches import Rectangle
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-from ..geometry import transform_points
-from .parameter_figures import MATCH_COLORS, _grid
-from .style import COLORS, ERROR_CMAP, FIGURE_WIDTH
+from helpers.geometry import transform_points
+from helpers.viz.parameter_figures import MATCH_COLORS, _grid
+from helpers.viz.style import COLORS, ERROR_CMAP, FIGURE_WIDTH
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
 HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")

@@ -15,10 +15,10 @@ import io
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..scene import CLASS_NAMES
-from .display import interactive_views, use_offscreen_vtk
-from .player import scan_player, top_down  # noqa: F401 (notebooks call render.scan_player)
-from .style import CLASS_COLORS, COLORS, ERROR_CMAP, FIGURE_WIDTH, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
+from helpers.sim.scene import CLASS_NAMES
+from helpers.viz.display import interactive_views, use_offscreen_vtk
+from helpers.viz.player import scan_player, top_down  # noqa: F401 (notebooks call render.scan_player)
+from helpers.viz.style import CLASS_COLORS, COLORS, ERROR_CMAP, FIGURE_WIDTH, HEIGHT_CMAP, WINDOW  # noqa: F401 (notebooks use render.ERROR_CMAP)
 
 
 def pyvista():

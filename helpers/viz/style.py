@@ -21,7 +21,7 @@ COLORS = {
     "fixed": "#17becf",  # the scan it is registered to
     "reference": "#9467bd",  # purple: the reference workflow's run, beside ours (notebook 7)
 }
-CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.scene label
+CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by helpers.sim.scene label
 HEIGHT_CMAP = "viridis"  # heights: dark violet (low) to yellow (high)
 ERROR_CMAP = "plasma"  # errors and distances: dark blue (small) to yellow (large)
 WINDOW = (900, 600)  # pixels of a 3-D view
@@ -60,3 +60,16 @@ def inset_zoom(ax, draw, window, at) -> None:
 def segments(a, b) -> np.ndarray:
     """(L, 2, 2) top-view segments from two (L, 2+) arrays of end points."""
     return np.stack([np.asarray(a)[:, :2], np.asarray(b)[:, :2]], axis=1)
+
+
+def scale_bar(axis, width_m: float, where: str = "lower left") -> None:
+    """A bar of a round length (1, 2 or 5 times a power of ten metres, about a quarter of
+    ``width_m``, the width of the view) with its length written under it, so that a view
+    without ticks still shows its scale."""
+    from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
+
+    power = 10 ** np.floor(np.log10(width_m / 4))
+    length = max(m * power for m in (1, 2, 5) if m * power <= width_m / 3)
+    bar = AnchoredSizeBar(axis.transData, length, f"{length:g} m", where, frameon=False, size_vertical=0, pad=0.4)
+    bar.size_bar.get_children()[0].set(linewidth=2.5)
+    axis.add_artist(bar)

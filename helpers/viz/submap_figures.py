@@ -6,11 +6,10 @@ from __future__ import annotations
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Circle
-from mpl_toolkits.axes_grid1.anchored_artists import AnchoredSizeBar
 
-from .parameter_figures import MATCH_COLORS
-from .render import pyvista
-from .style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, xy_of
+from helpers.viz.parameter_figures import MATCH_COLORS
+from helpers.viz.render import pyvista
+from helpers.viz.style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, scale_bar, xy_of
 
 
 def submap_panels(
@@ -116,7 +115,9 @@ def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_poi
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
     x, y = c[-1]
     window = (x - zoom_m / 2, x + zoom_m / 2, y - zoom_m / 2, y + zoom_m / 2)
-    inset_zoom(ax, lambda axis: (draw(axis, 60), scale_bar(axis, zoom_m / 5)), window, (0.3, 0.28, 0.4, 0.44))
+    inset_zoom(
+        ax, lambda axis: (draw(axis, 60), scale_bar(axis, zoom_m, "lower right")), window, (0.3, 0.28, 0.4, 0.44)
+    )
     return fig
 
 
@@ -226,16 +227,8 @@ def trajectory_figure(
     if zoom_m:
         centre = (gt[-1] + est[-1]) / 2
         window = (centre[0] - zoom_m / 2, centre[0] + zoom_m / 2, centre[1] - zoom_m / 2, centre[1] + zoom_m / 2)
-        inset_zoom(ax, lambda axis: (draw(axis, 8), scale_bar(axis, zoom_m / 4)), window, inset_at)
+        inset_zoom(ax, lambda axis: (draw(axis, 8), scale_bar(axis, zoom_m, "lower right")), window, inset_at)
     return fig
-
-
-def scale_bar(ax, metres: float, where: str = "lower right") -> None:
-    """A bar of ``metres`` with its length written under it, for views without ticks."""
-    bar = AnchoredSizeBar(
-        ax.transData, metres, f"{metres:g} m", where, pad=0.4, frameon=False, size_vertical=metres / 20, color="black"
-    )
-    ax.add_artist(bar)
 
 
 def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, position_m, turning=None):

@@ -7,8 +7,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
-from .parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
-from .style import COLORS, FIGURE_WIDTH
+from helpers.viz.parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
+from helpers.viz.style import COLORS, FIGURE_WIDTH
 
 
 def _stacked_matches(ax, x, correct, total, width, xlabel, default, log=False):

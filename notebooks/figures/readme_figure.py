@@ -9,7 +9,7 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 
 from helpers.viz import figures
-from helpers.pipeline import default_run
+from helpers.slam.pipeline import default_run
 
 _, result = default_run()
 start = result.poses_gt[0, :2, 3]
