@@ -218,4 +218,3 @@ def test_a_map_too_wide_for_its_grid_is_refused_before_allocating():
     with pytest.raises(SlamError, match=r"the map spans 10000001 x 10000001 m: 1e\+14 cells .*limit is 50,000,000"):
         height_field_from_points(points, np.zeros(3, np.uint8), cell=1.0)
     assert time.perf_counter() - start < TIME_LIMIT_S
-
