@@ -8,6 +8,7 @@ import struct
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import laspy
 import numpy as np
@@ -218,3 +219,24 @@ def test_a_map_too_wide_for_its_grid_is_refused_before_allocating():
     with pytest.raises(SlamError, match=r"the map spans 10000001 x 10000001 m: 1e\+14 cells .*limit is 50,000,000"):
         height_field_from_points(points, np.zeros(3, np.uint8), cell=1.0)
     assert time.perf_counter() - start < TIME_LIMIT_S
+
+
+def test_a_tile_compressed_point_by_point_is_read(tmp_path):
+    """laszip's first compressor (LAZ 1.0) has no chunks and no chunk table: the real downtown tile beside the
+    repository is written so; a chunked tile relabelled so is refused in one line, never a crash."""
+    real = Path(__file__).resolve().parents[2] / "shared" / "data" / "urban_toronto.laz"
+    if real.exists():
+        assert len(read_map(real).points) == 213_093
+    path = tmp_path / "relabelled.laz"
+    las = laspy.LasData(laspy.LasHeader(point_format=1, version="1.2"))
+    las.x, las.y, las.z = np.arange(1000.0), np.arange(1000.0), np.zeros(1000)
+    las.write(path)
+    data = bytearray(path.read_bytes())
+    struct.pack_into("<H", data, _laszip(data), 1)  # the compressor: pointwise
+    path.write_bytes(data)
+    try:
+        points = read_map(path).points
+    except SlamError as error:
+        assert "not a readable LAS/LAZ file" in str(error)
+    else:
+        assert points.shape[1] == 3

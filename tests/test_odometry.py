@@ -94,6 +94,17 @@ def test_odometry_falls_back_on_a_hard_scan_instead_of_crashing(flight):
     assert np.isfinite(result.poses).all()
 
 
+def test_a_scan_too_sparse_to_describe_falls_back_instead_of_crashing(flight):
+    """A scan with no more points than FPFH's neighbours (a swath mostly over water) gets no descriptors:
+    its step is registered by ICP from the last motion and the run goes on."""
+    scans = list(flight.scans[:13])
+    scans[9] = scans[9][np.random.default_rng(0).choice(len(scans[9]), Config().features.neighbors, replace=False)]
+    result = run_odometry(scans, flight.poses[0], Config())
+    assert len(result.poses) == 5 and np.isfinite(result.poses).all()
+    assert [index for index, _ in result.fallbacks] == [9, 12]
+    assert "robust fit failed" in dict(result.fallbacks)[9]
+
+
 def test_odometry_refuses_too_few_scans(flight):
     with pytest.raises(SlamError, match="at least 2 accepted scans"):
         run_odometry(flight.scans[:2], np.eye(4), Config())

@@ -1,4 +1,4 @@
-"""Command line: ``python -m helpers dataset|run|site ...`` (installed: ``aerial-lidar-slam``).
+"""Command line: ``python -m helpers dataset|run|flight|site ...`` (installed: ``aerial-lidar-slam``).
 
 Errors in the input end in one line on stderr and exit code 2, never a
 traceback, and never a half-written output folder. The output folder is
@@ -18,6 +18,7 @@ import threading
 import time
 from contextlib import contextmanager
 
+from helpers.cli import flight
 from helpers.errors import SlamError
 
 
@@ -65,6 +66,8 @@ def _main(argv=None) -> int:
             return _dataset(args)
         if args.command == "run":
             return _run(args)
+        if args.command == "flight":
+            return flight.run(args)
         if args.command == "site":
             from helpers.site import build_site
 
@@ -96,6 +99,8 @@ def _parser() -> argparse.ArgumentParser:
     ds = sub.add_parser("dataset", help="simulate the lidar scans of a flight over a map")
     _map_arguments(ds)
     ds.add_argument("--out", required=True, help="output folder (scans/, poses_gt.txt, map_gt.ply)")
+
+    flight.add_parser(sub)
 
     run = sub.add_parser("run", help="create the dataset and run the whole SLAM pipeline on it")
     _map_arguments(run)

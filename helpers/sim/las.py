@@ -28,6 +28,7 @@ POINT_SIZES = (20, 28, 26, 34, 57, 63, 30, 36, 38, 59, 67)  # bytes of a record 
 VLR_HEADER, EVLR_HEADER = 54, 60  # bytes of a (extended) variable-length record before its data
 LASZIP_VLR = (b"laszip encoded", 22204)  # user id and record id of the VLR that describes a LAZ's compression
 MAX_LAZ_CHUNK, VARIABLE_CHUNKS = 1_000_000, 0xFFFFFFFF  # points per LAZ chunk (laszip writes 50,000), or variable
+POINTWISE = 1  # laszip's first compressor (LAZ 1.0): the points one after the other, with no chunk table
 LAYERED, LAYERS = 3, {10: 9, 11: 1, 12: 2}  # laszip's layered compressor; layers per item (BYTE14: one a byte)
 MAX_VLR_BYTES = 1 << 26  # real tiles hold kilobytes of VLRs; laspy reads them all into memory
 # Scales and offsets that keep every coordinate a record can hold (offset + scale x a 32-bit integer) finite
@@ -121,6 +122,8 @@ def _check_laszip(f, vlr: bytes | None, record: int, offset: int, count: int, si
         raise bad(f"its laszip VLR describes {sum(sizes)}-byte points, its header {record}-byte points")
     if not (0 < chunk_size <= MAX_LAZ_CHUNK or chunk_size == VARIABLE_CHUNKS):
         raise bad(f"its LAZ chunks of {chunk_size:,} points are not 1 to {MAX_LAZ_CHUNK:,} points")
+    if compressor == POINTWISE:
+        return  # laszip's first format: the points compressed one after the other, no chunks, no chunk table
     f.seek(offset)
     table = int.from_bytes(f.read(8), "little", signed=True)
     if table <= offset:  # a writer that could not go back puts it at the end

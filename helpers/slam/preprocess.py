@@ -18,7 +18,7 @@ import numpy as np
 
 from helpers.config.tables import Config
 from helpers.geometry import check_points
-from helpers.slam.registration.features import grid_average, keypoint_fpfh
+from helpers.slam.registration.features import BINS, HISTOGRAMS, grid_average, keypoint_fpfh
 from helpers.slam.registration.icp import IcpCloud, icp_cloud
 
 
@@ -74,12 +74,16 @@ def reads_ahead(config: Config) -> bool:
 
 
 def describe(frame: Frame, config: Config) -> Frame:
-    """Give ``frame`` its FPFH descriptors and keypoints, once."""
+    """Give ``frame`` its FPFH descriptors and keypoints, once (none when it has no more points than
+    ``[features] neighbors``)."""
     if frame.features is None:
         start = time.perf_counter()
-        frame.keypoints, frame.features = keypoint_fpfh(
-            frame.points, config.features.neighbors, config.features.keypoint_share
-        )
+        if len(frame.points) > config.features.neighbors:
+            frame.keypoints, frame.features = keypoint_fpfh(
+                frame.points, config.features.neighbors, config.features.keypoint_share
+            )
+        else:  # too few points to describe (a scan mostly over water): none, and its registration falls back
+            frame.keypoints, frame.features = np.zeros(0, dtype=np.int64), np.zeros((0, HISTOGRAMS * BINS))
         frame.timings["fpfh"] = frame.timings.get("fpfh", 0.0) + elapsed_ms(start)
     return frame
 

@@ -193,6 +193,8 @@ def _matches(moving: Frame, fixed: Frame, features, near) -> np.ndarray:
     for frame, chosen, which in ((moving, on_moving, "moving"), (fixed, on_fixed, "fixed")):
         if len(frame.features) != len(chosen):
             raise SlamError(f"the {which} frame has {len(frame.features)} descriptors for {len(chosen)} keypoints")
+    if not (len(on_moving) and len(on_fixed)):  # a scan too sparse to describe: nothing to match, the fit fails
+        return np.zeros((0, 2), dtype=np.int64)
     matches = match_features(moving.features, fixed.features, features.match_threshold, features.match_ratio, near)
     return np.column_stack([on_moving[matches[:, 0]], on_fixed[matches[:, 1]]])
 
