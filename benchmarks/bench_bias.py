@@ -79,6 +79,9 @@ FLIGHTS = {
     "autzen-150": ("autzen", 150.0, 0, "tile"),
     "autzen-250": ("autzen", 250.0, 0, "tile"),
 }
+SHARED = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data")
+for _tile in ("forest_bc_1", "forest_bc_2", "farmland_fr", "lake_mountain", "steep_afghanistan", "urban_toronto"):
+    FLIGHTS[f"{_tile}-150"] = (f"tile:{_tile}", 150.0, 0, "tile")  # the tiles of ../shared/data, their loop
 EXPERIMENT_FLIGHTS = ("sparse-150", "autzen-150")
 EXPERIMENTS = ("stages", "before", "grid", "icpgrid", "surface", "start", "skip", "metric", "crop", "epsilon", "steep")
 EXPERIMENTS += ("rows", "rowless")
@@ -88,6 +91,14 @@ def surface_of(scene: str, variant: str = "tile") -> tuple[HeightField, np.ndarr
     """A scene's height field and its loop's waypoints (XY). ``variant``: ``tile`` as the package builds
     it; ``linear`` a tile's holes filled by linear interpolation; ``sparse`` the procedural scene resampled
     at the density of a tile and rebuilt as the package rebuilds a tile."""
+    if scene.startswith("tile:"):
+        from helpers.sim.flight_plan import loop_plan
+
+        name = scene.removeprefix("tile:")
+        path = next(os.path.join(SHARED, f) for f in os.listdir(SHARED) if f.startswith(name + "."))
+        tile = read_map(path)
+        field = height_field_from_points(tile.points, tile.labels, MAP_CELL)
+        return field, loop_plan(field, 150.0)[:, :2]
     if scene == "autzen":
         tile = read_map(AUTZEN)
         field = height_field_from_points(tile.points, tile.labels, MAP_CELL)
