@@ -10,7 +10,7 @@ the truth, ``xi = Log(inv(T_true) @ T_est)`` (translation first, in the moving
 scan's frame, the information's convention), is whitened by its information
 after calibration (``[pose_graph] information_scale`` and the floor of
 ``min_sigma_m`` / ``min_sigma_deg``; an edge back's then divided by its span,
-as :func:`helpers.slam.slam.build_pose_graph` weighs it). Calibrated, ``xi^T I xi`` follows a
+as :func:`helpers.slam.graph.build.build_pose_graph` weighs it). Calibrated, ``xi^T I xi`` follows a
 chi-square law with 6 degrees of freedom: per degree of freedom its median is
 0.89 and its mean 1, and the error along each principal direction of the
 covariance, in sigmas, has an RMS of 1. ``weak`` is that RMS along the
@@ -43,10 +43,10 @@ from bench_bias import flight
 
 from helpers.config.pose_graph import INFORMATION_SOURCES
 from helpers.quality.metrics import ate
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import pose3
 from helpers.slam.graph.information import SWAP_ROTATION_TRANSLATION, calibrated
 from helpers.slam.pipeline import run_slam
-from helpers.slam.slam import build_pose_graph
 
 # label: (bench_bias flight, surface variant)
 FLIGHTS = {

@@ -40,8 +40,9 @@ from helpers.sim.gnss import GnssFixes, simulate_gnss
 from helpers.sim.maps import IDENTITY_FRAME
 from helpers.sim.sensor import Surface, poses_from_waypoints
 from helpers.slam.flight_fit import fit_to_flight, flight_of
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import gnss_factors
-from helpers.slam.slam import Slam, build_pose_graph
+from helpers.slam.slam import Slam
 
 SWING_PERIOD = 400.0  # m of track per period of the speed swing
 

@@ -164,7 +164,7 @@ def test_a_damaged_copy_of_a_tile_in_the_cache_is_unpacked_again(tmp_path, damag
     else:
         del data[-1000:]
     copy.write_bytes(bytes(data))
-    with caplog.at_level(logging.WARNING, logger="helpers.sim.maps"):
+    with caplog.at_level(logging.WARNING, logger="helpers.sim.archive"):
         again = read_map(archive)
     np.testing.assert_array_equal(again.points, good.points)
     warnings = [r.getMessage() for r in caplog.records if "assuming metres" not in r.getMessage()]  # the tile's

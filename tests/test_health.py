@@ -18,10 +18,10 @@ from helpers.quality.graph_checks import (
 )
 from helpers.quality.trust import BLIND_RUN_STEPS, CORRECTION_FLOOR_M, MAX_EXPECTED_ATE_M, WEAK_SIGMA_M, assess
 from helpers.sim.gnss import GnssFixes
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import Edge, gnss_factors
 from helpers.slam.graph.information import calibrated
 from helpers.slam.odometry import OdometryResult
-from helpers.slam.slam import build_pose_graph
 
 CONFIG = Config().with_values(pose_graph={"graph_weights": "hessian"})
 NODES = 30

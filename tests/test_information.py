@@ -6,11 +6,11 @@ import pytest
 from helpers.config.tables import Config
 from helpers.errors import SlamError
 from helpers.geometry import transform_points
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import Edge
 from helpers.slam.graph.information import MAX_SIGMA, blended, calibrated, plane_information, weakest, whitened
 from helpers.slam.odometry import OdometryResult
 from helpers.slam.registration.icp import icp_cloud, refine_icp
-from helpers.slam.slam import build_pose_graph
 
 ICP = {"inlier_distance": 2.0, "max_iterations": 30, "tolerance": 1e-6}
 

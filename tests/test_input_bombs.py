@@ -97,9 +97,9 @@ def test_a_bomb_on_the_command_line_is_one_error_line_within_seconds(tmp_path, c
 
 
 def test_the_size_cap_holds_while_streaming(tmp_path, monkeypatch):
-    import helpers.sim.maps
+    import helpers.sim.archive
 
-    monkeypatch.setattr(helpers.sim.maps, "MAX_TILE_BYTES", 1 << 20)
+    monkeypatch.setattr(helpers.sim.archive, "MAX_TILE_BYTES", 1 << 20)
     archive = tmp_path / "big.tar.gz"
     noise = np.random.default_rng(0).bytes(2 << 20)  # does not compress: passes the ratio check
     _tar_gz(archive, "tile.las", len(noise), [noise])

@@ -10,6 +10,7 @@ from scipy.spatial.transform import Rotation
 
 from helpers.config.tables import Config, PoseGraphConfig
 from helpers.errors import SlamError
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import (
     BetweenFactor,
     ConstantVelocityFactor,
@@ -21,7 +22,6 @@ from helpers.slam.graph.factors import (
 )
 from helpers.slam.graph.optimizer import PoseGraph
 from helpers.slam.odometry import OdometryResult
-from helpers.slam.slam import build_pose_graph
 
 NODES = 120
 STEP = 6.0  # m between nodes, as the default flight's accepted scans

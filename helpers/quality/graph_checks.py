@@ -12,10 +12,10 @@ import numpy as np
 
 from helpers.errors import SlamError
 from helpers.quality.metrics import is_false_loop
+from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import FactorContext, pose3
 from helpers.slam.graph.information import SWAP_ROTATION_TRANSLATION, whitened
 from helpers.slam.loops.closer import radius_after
-from helpers.slam.slam import build_pose_graph
 
 LEFT_FACTOR = 4.0  # a revisit: back within the search radius after flying this many (fixed) radii away
 MOVE_FLOOR_M = 0.01  # m: a move this small is no move (correction_sigmas)
@@ -173,7 +173,7 @@ def optimized_with(result, loops) -> np.ndarray:
 
 
 def _run_graph(result, loops):
-    """The run's pose graph rebuilt from its edges (:func:`helpers.slam.slam.build_pose_graph`) with ``loops`` as
+    """The run's pose graph rebuilt from its edges (:func:`helpers.slam.graph.build.build_pose_graph`) with ``loops`` as
     its loop edges and no GNSS fix."""
 
     return build_pose_graph(result.odometry, result.extra_edges, loops, result.config)

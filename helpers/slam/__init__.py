@@ -22,7 +22,7 @@ EXPORTS = {
     "Slam": "helpers.slam.slam",
     "SlamResult": "helpers.slam.slam",
     "Step": "helpers.slam.slam",
-    "build_pose_graph": "helpers.slam.slam",
+    "build_pose_graph": "helpers.slam.graph.build",
     "run_slam": "helpers.slam.pipeline",
     "prepare_scan": "helpers.slam.preprocess",
     "fpfh": "helpers.slam.registration.features",

@@ -126,7 +126,7 @@ class LoopFactor(BetweenFactor):
 def edge_information(edge: Edge, settings, *, loop: bool = False) -> np.ndarray:
     """The (6, 6) translation-first information of ``edge`` under the
     ``[pose_graph]`` ``settings``, the one rule the run's pose graph
-    (:func:`helpers.slam.slam.build_pose_graph`) and the loop search's graph
+    (:func:`helpers.slam.graph.build.build_pose_graph`) and the loop search's graph
     (:mod:`helpers.slam.loops.uncertainty`) both weigh their edges by: with
     ``graph_weights = "hessian"`` the registration's own (``edge.information``,
     calibrated; an edge back's divided by the steps it spans), with ``"icp"``
