@@ -44,6 +44,12 @@ robustness: $(STAMP)
 
 setup: $(STAMP)
 
+# JupyterLab on the notebooks with the project's settings (jupyter/: no build prompt, conftest.py hidden, the
+# kernels' OpenMP and Open3D variables); JupyterLab refuses to run as root without --allow-root.
+.PHONY: lab
+lab: $(STAMP)
+	JUPYTER_CONFIG_PATH=$(CURDIR)/jupyter $(VENV)/bin/jupyter lab $$([ "$$(id -u)" = 0 ] && echo --allow-root) notebooks/
+
 # data/: the default flight in the reference's file formats (aerialMap.tar.gz, gTruthWayPoints.mat), written
 # by the package; tests/test_datafiles.py fails when the committed files and the package disagree.
 data: $(STAMP)

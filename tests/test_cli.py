@@ -1,12 +1,15 @@
 """The command line: outputs on success, one clear line and exit code 2 on bad input."""
 
+import os
 import subprocess
 import sys
 
 import numpy as np
 import pytest
 
-from helpers.__main__ import main
+import helpers
+from helpers.__main__ import ENVIRONMENT, main
+from helpers.cli.terminal import reason_lines, verdict
 from helpers.config.files import config_to_toml, load_config
 from helpers.config.tables import Config, FeaturesConfig, SensorConfig
 
@@ -125,7 +128,14 @@ def test_an_untrusted_run_warns_once_and_says_so_in_the_metrics(flat_plane, tmp_
     assert result.returncode == 0, result.stderr
     warnings = [line for line in result.stderr.splitlines() if line.startswith("warning:")]
     assert warnings[0] == "warning: no unit in the LAS header's CRS records: assuming metres"  # the plane's tile
-    assert len(warnings) == 2 and "cannot be trusted" in warnings[1] and "skip_frames" in warnings[1]
+    reasons = warnings[1:]  # each reason of the trust flag a warning of its own, its cause and advice under it
+    assert reasons and all(line.startswith("warning: not trusted: ") for line in reasons)
+    assert max(len(line) for line in result.stderr.splitlines()) < 300
+    assert "\n  Try [registration] skip_frames = 1 (now 3).\n" in result.stderr
+    n = len(reasons)
+    assert result.stdout.splitlines()[-1] == (
+        f'not trusted: {n} reason{"s" if n > 1 else ""} in the warnings above (metrics.json: "trusted": false)'
+    )
     assert "scan 3:" not in result.stderr  # each fallback is counted, not printed
     assert "parameters fitted to the flight (600 m above the ground" in result.stdout  # the reference's height
     assert "9 of 9 odometry steps fell back" in result.stdout
@@ -157,3 +167,107 @@ def test_run_fits_the_parameters_to_a_low_flight_unless_told_not_to(grid_tile, t
     assert "fitted" not in kept.stdout
     kept_config = load_config(tmp_path / "kept" / "config.toml")
     assert kept_config.registration.skip_frames == 3 and kept_config.pose_graph == Config().pose_graph
+
+
+def test_version_is_the_package_version(capsys):
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out == f"aerial-lidar-slam-helpers {helpers.__version__}\n"
+
+
+@pytest.mark.parametrize("command", ["dataset", "run", "flight", "site"])
+def test_each_command_explains_itself_with_an_example(capsys, monkeypatch, command):
+    """--help: a description of its own (not only the usage), an example command line to copy whole, and no
+    reStructuredText markup."""
+    monkeypatch.setenv("COLUMNS", "80")
+    with pytest.raises(SystemExit) as done:
+        main([command, "--help"])
+    assert done.value.code == 0
+    text = capsys.readouterr().out
+    paragraphs = text.split("\n\n")
+    assert paragraphs[0].startswith(f"usage: python -m helpers {command}")
+    assert paragraphs[1][0].isupper() and paragraphs[1].rstrip().endswith(".")  # the description
+    heading, *examples = paragraphs[-1].splitlines()
+    assert heading == ("example:" if len(examples) == 1 else "examples:") and examples
+    assert all(line.startswith(f"  python -m helpers {command} ") for line in examples)  # each on one line
+    assert "`" not in text
+
+
+def test_the_program_help_lists_the_commands_with_examples(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    text = capsys.readouterr().out
+    examples = text.split("examples:\n")[1].splitlines()
+    assert [line.split()[3] for line in examples] == ["dataset", "run", "run", "flight", "site"]
+    assert any("--scans" in line for line in examples)
+    assert "--version" in text and "`" not in text
+
+
+def test_help_imports_no_heavy_library():
+    """--help answers before numpy, Open3D or GTSAM load: they are imported by the commands that use them."""
+    code = (
+        "import runpy, sys\n"
+        "sys.argv = ['helpers', '--help']\n"
+        "try:\n    runpy.run_module('helpers', run_name='__main__')\n"
+        "except SystemExit:\n    pass\n"
+        "print(sorted(m for m in ('numpy', 'open3d', 'gtsam', 'scipy', 'laspy') if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == "[]"
+
+
+def test_the_program_sets_openmp_and_open3d_variables_unless_the_user_has(monkeypatch, capsys):
+    """As the program (no argv given: the process's own), before any command imports Open3D; a caller in
+    Python (argv given) keeps its environment as it is."""
+    monkeypatch.setattr(sys, "argv", ["aerial-lidar-slam", "--version"])
+    monkeypatch.setattr("os.environ", {"OMP_WAIT_POLICY": "active"})
+    with pytest.raises(SystemExit):
+        main()
+    assert os.environ == {"OMP_WAIT_POLICY": "active", "OPEN3D_DISABLE_WEB_VISUALIZER": "true"}
+    monkeypatch.setattr("os.environ", {})
+    with pytest.raises(SystemExit):
+        main(["--version"])
+    assert os.environ == {}
+    assert ENVIRONMENT == {"OMP_WAIT_POLICY": "passive", "OPEN3D_DISABLE_WEB_VISUALIZER": "true"}
+
+
+def test_python_m_helpers_sets_the_variables_before_open3d_loads():
+    """The real entry point, in a process of its own: the variables are there when the command starts."""
+    code = (
+        "import os, runpy, sys\n"
+        "import helpers.cli.main as cli\n"
+        "cli._main = lambda argv: print(os.environ.get('OMP_WAIT_POLICY'), os.environ.get("
+        "'OPEN3D_DISABLE_WEB_VISUALIZER'), 'open3d' in sys.modules) or 0\n"
+        "sys.argv = ['helpers', 'run']\n"
+        "try:\n    runpy.run_module('helpers', run_name='__main__')\n"
+        "except SystemExit:\n    pass\n"
+    )
+    env = {k: v for k, v in os.environ.items() if k not in ENVIRONMENT}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["passive", "true", "False"]
+
+
+def test_a_reason_of_the_trust_flag_is_a_short_warning_with_its_cause_and_advice_under_it():
+    problem = (
+        "9 of 9 odometry steps (100%) could not be registered and fell back to the previous motion (scans 1-9). "
+        "Likely cause: consecutive accepted scans share too little ground (a low flight). "
+        "Try [registration] skip_frames = 1 (now 3)."
+    )
+    assert reason_lines(problem) == [
+        "warning: not trusted: 9 of 9 odometry steps (100%) could not be registered and fell back to the previous "
+        "motion (scans 1-9).",
+        "  Likely cause: consecutive accepted scans share too little ground (a low flight).",
+        "  Try [registration] skip_frames = 1 (now 3).",
+    ]
+    assert reason_lines("ICP RMSE above 0.6 m: it may break.") == [
+        "warning: not trusted: ICP RMSE above 0.6 m: it may break."
+    ]
+
+
+def test_the_last_line_of_a_run_says_trusted_or_not():
+    assert verdict([]) == "trusted"
+    assert verdict(["a."]) == 'not trusted: 1 reason in the warnings above (metrics.json: "trusted": false)'
+    assert verdict(["a.", "b."]).startswith("not trusted: 2 reasons")

@@ -7,7 +7,7 @@ import helpers
 from helpers.config.tables import SensorConfig
 from helpers.errors import SlamError
 from helpers.sim.scene import default_scene
-from helpers.sim.tum import read_tum
+from helpers.sim.trajectories import read_tum
 
 
 def test_default_flight_is_a_closed_loop_with_overlap(default_dataset):

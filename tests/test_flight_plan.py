@@ -94,3 +94,16 @@ def test_a_plan_keeps_to_the_tiles_ground_and_flies_over_its_lakes():
     for plan in (survey_plan(field, 100.0), loop_plan(field, 100.0)):
         cells = field.cell_of(plan[:, :2])
         assert (field.valid[cells] | (np.hypot(plan[:, 0] - 60, plan[:, 1] - 20) < 40)).all()
+
+
+def test_waypoints_that_leave_a_tile_in_feet_are_named_in_feet():
+    """The map's bounds in an error speak in the waypoint file's own units (here US survey feet)."""
+    from helpers.sim.sensor import check_coverage, check_heights
+
+    feet = 1200.0 / 3937.0
+    frame = MapFrame((5000.0, 9000.0), feet, feet, "US survey foot")
+    field = flat_field(100.0, 100.0)
+    with pytest.raises(SlamError, match=r"x 4836\.0\.\.5164\.0 US survey ft"):
+        check_coverage(field, np.array([[0.0, 0.0, 100.0], [400.0, 0.0, 100.0]]), frame)
+    with pytest.raises(SlamError, match=r"reaches 98\.4 US survey ft"):
+        check_heights(field, np.array([[0.0, 0.0, 10.0]]), frame)

@@ -214,7 +214,9 @@ CSV_CASES = [
     ("1\n2\n", r"N x 2 or N x 3 .* shape \(2, 1\)"),
     ("x,y\n1,two\n", "every line must be x,y or x,y,z numbers"),
     ("1,2,\n", "every line must be x,y or x,y,z numbers"),
-    ("1;2\n3;4\n", "every line must be x,y or x,y,z numbers"),
+    ("1;2,3\n4;5,6\n", "every line must be x,y or x,y,z numbers"),  # the first line's comma: comma-separated
+    ("x;y\n1,2\n", r"every line must be x,y or x,y,z numbers \(separated by semicolons\)"),
+    ("x,y\n1,2,3\n", "lines have different numbers of columns"),
     ("x,y\nz,w\n1,2\n", "every line must be x,y or x,y,z numbers"),
     ("1,nan\n", "NaN or infinite"),
     ("1,inf\n", "NaN or infinite"),
@@ -243,6 +245,7 @@ def test_a_csv_of_binary_garbage_is_refused(tmp_path):
         ("x,y\n1,2\n", [[1, 2]]),  # one waypoint
         ("1,2,700\n", [[1, 2, 700]]),
         (" 1 , 2 \n\n3,4\n", [[1, 2], [3, 4]]),
+        ("1;2\n3;4\n", [[1, 2], [3, 4]]),  # semicolons, as spreadsheets write in much of Europe
         ("1,2\n1,2\n1,2\n", [[1, 2], [1, 2], [1, 2]]),  # the drone hovers
     ],
 )
@@ -250,6 +253,53 @@ def test_valid_csv_waypoints_load(tmp_path, text, expected):
     path = tmp_path / "flight.csv"
     path.write_text(text)
     np.testing.assert_array_equal(read_waypoints(path), expected)
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "x,y,z\n1,2,700\n3,4,710\n",
+        "y,x,z\n2,1,700\n4,3,710\n",  # a file written y,x flies the same flight, not a transposed one
+        "Z,Y,X\n700,2,1\n710,4,3\n",
+        "x;y;z\n1;2;700\n3;4;710\n",
+        " Y ; x ; Z \n2;1;700\n4;3;710\n",
+        '"z","x","y"\n700,1,2\n710,3,4\n',
+        "y_m,x_m,z_m\n2,1,700\n4,3,710\n",  # a unit after the name
+        "X (ft);Y (ft);Z [ft]\n1;2;700\n3;4;710\n",
+        "1;2;700\n3;4;710\n",  # no header: x, y, z in that order
+    ],
+)
+def test_csv_columns_are_read_by_their_header_names(tmp_path, text):
+    path = tmp_path / "flight.csv"
+    path.write_text(text)
+    np.testing.assert_array_equal(read_waypoints(path), [[1, 2, 700], [3, 4, 710]])
+
+
+def test_csv_header_of_y_and_x_only_gives_xy(tmp_path):
+    path = tmp_path / "flight.csv"
+    path.write_text("Y;X\n2;1\n4;3\n")
+    np.testing.assert_array_equal(read_waypoints(path), [[1, 2], [3, 4]])
+
+
+@pytest.mark.parametrize(
+    ("header", "found"),
+    [
+        ("x,yy,z", "'x', 'yy', 'z'"),  # a misspelt name
+        ("x,z", "'x', 'z'"),  # y missing
+        ("x,y,z,time", "'x', 'y', 'z', 'time'"),  # a column that is not a coordinate
+        ("x,y,x_m", "'x', 'y', 'x_m'"),  # x twice
+        ("X;X;Y", "'X', 'X', 'Y'"),  # twice the same
+        ("lon,lat", "'lon', 'lat'"),
+    ],
+)
+def test_a_csv_header_naming_other_columns_is_one_error_naming_them(tmp_path, header, found):
+    path = tmp_path / "flight.csv"
+    path.write_text(f"{header}\n1,2,3,4\n")
+    with pytest.raises(SlamError) as error:
+        read_waypoints(path)
+    message = str(error.value)
+    assert f"flight.csv: the header names the columns {found};" in message
+    assert "x and y, and optionally z" in message and "\n" not in message
 
 
 MAT_CASES = [
@@ -323,6 +373,7 @@ def test_random_csv_files_load_or_raise_slam_error(tmp_path):
         ("empty.csv", b"", "empty.csv holds no waypoints"),
         ("header.csv", b"x,y\n", "header.csv holds no waypoints"),
         ("text.csv", b"1,two\n", "every line must be"),
+        ("named.csv", b"x,yy,z\n1,2,3\n", "named.csv: the header names the columns 'x', 'yy', 'z';"),
     ],
 )
 def test_bad_waypoints_give_one_error_line(tmp_path, capsys, name, content, message):

@@ -27,6 +27,17 @@ def test_autzen_is_read_in_metres_and_centred(autzen):
     np.testing.assert_allclose(tile.points[:, 2].min(), header.mins[2] * FOOT, atol=1e-3)
 
 
+def test_the_tile_crs_records_travel_with_its_frame_and_to_tile_undoes_it(autzen):
+    tile = read_map(autzen)
+    vlrs = laspy.open(autzen).header.vlrs
+    source = {v.record_id: v.record_data_bytes() for v in vlrs if v.user_id == "LASF_Projection"}
+    assert {r.record_id: r.data for r in tile.frame.crs} == source  # WKT and GeoTIFF keys, as the tile has them
+    assert [r.record_id for r in tile.frame.crs if r.is_wkt] == [2112]
+    las = laspy.read(autzen)
+    feet = np.column_stack([las.x, las.y, las.z])
+    np.testing.assert_allclose(tile.frame.to_tile(tile.points), feet, atol=1e-6)
+
+
 def test_tarball_is_unpacked_into_the_cache_not_beside_it(autzen, tmp_path):
     archive = tmp_path / "aerialMap.tar.gz"
     with tarfile.open(archive, "w:gz") as tar:

@@ -158,6 +158,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     and keep the answer that pairs more, near the truth. With the overlap crop,
     made at the last motion, ICP from the fit pairs too little to fit well, and
     the RMSE check restarts it first."""
+    import helpers.slam.registration.fallbacks as fallbacks
     import helpers.slam.registration.pair as frames
 
     config = Config().with_values(registration={"overlap_crop": crop})
@@ -165,7 +166,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     truth = np.linalg.inv(flight.poses[fixed_id]) @ flight.poses[moving_id]
     far = truth.copy()
     far[:3, 3] += [40.0, 0.0, 0.0]  # most of the 53 m strip along the track: ICP settles 100 m off on few pairs
-    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(flight.scans[k], config), config) for k in (fixed_id, moving_id))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert ("paired" if not crop else "restarted from the previous motion") in (pair.fallback or ""), pair.fallback
@@ -185,6 +186,7 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     see that the pairs pin nothing along the plane and keep the last motion
     (the flight's momentum) instead of the jump."""
     import helpers
+    import helpers.slam.registration.fallbacks as fallbacks
     import helpers.slam.registration.pair as frames
 
     data = helpers.create_dataset(*flat_plane)
@@ -192,7 +194,7 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
     far = truth.copy()
     far[:3, 3] += [4.0, 0.0, 0.0]  # still over the plane: as many pairs as the truth
-    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth)
     assert "too flat" in (pair.fallback or ""), pair.fallback
@@ -206,6 +208,7 @@ def test_on_repeating_ground_a_fit_one_ridge_off_loses_to_the_last_motion(grid_t
     from the last motion too and, the fit being no better, keep the flight's
     momentum: a drone does not jump 6 m sideways between two scans."""
     import helpers
+    import helpers.slam.registration.fallbacks as fallbacks
     import helpers.slam.registration.pair as frames
 
     def ridges(x, y):
@@ -219,7 +222,7 @@ def test_on_repeating_ground_a_fit_one_ridge_off_loses_to_the_last_motion(grid_t
     truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
     far = truth.copy()
     far[:3, 3] += [0.0, 6.0, 0.0]  # one ridge over
-    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
+    monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert pair.constraint > WEAK_CONSTRAINT, pair.constraint  # the ground pins the motion: not the flat case
@@ -235,13 +238,14 @@ def test_a_fit_turned_half_round_loses_to_the_last_motion(flat_plane, monkeypatc
     the turned scan fits as well as the true one; 150 m above Autzen the turned fit kept fitting no better,
     and ``tests/test_step_bias.py`` has that flight.)"""
     import helpers
+    import helpers.slam.registration.fallbacks as fallbacks
     import helpers.slam.registration.pair as frames
 
     data = helpers.create_dataset(*flat_plane)
     config = Config()
     truth = np.linalg.inv(data.poses[3]) @ data.poses[6]
     half_round = np.diag([-1.0, -1.0, 1.0, 1.0])  # 180 degrees about the moving scan's vertical
-    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (truth @ half_round, np.zeros(0, bool)))
+    monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (truth @ half_round, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert "and 180 deg from the last motion" in (pair.fallback or ""), pair.fallback
@@ -255,11 +259,12 @@ def test_a_sharp_turn_the_guess_lags_behind_is_confirmed_not_doubted(monkeypatch
     recorded (20 of 45 steps of a tight test loop were before this), and the fit's answer stands."""
     from test_step_bias import STRIPS, turned_strips, yawed
 
+    import helpers.slam.registration.fallbacks as fallbacks
     import helpers.slam.registration.pair as frames
 
     config = STRIPS
     moving_points, fixed_points, truth = turned_strips(10.0)
-    monkeypatch.setattr(frames, "robust_fit", lambda *args, **kwargs: (truth, np.zeros(0, bool)))
+    monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (truth, np.zeros(0, bool)))
     moving, fixed = (frames.describe(prepare(p, config), config) for p in (moving_points, fixed_points))
     lagging = truth @ np.linalg.inv(yawed(10.0, (0.0, 0.0, 0.0)))
     pair = register_frames(moving, fixed, config, guess=lagging)

@@ -25,6 +25,7 @@ import helpers.config.files
 import helpers.outdir
 import helpers.paths
 import helpers.sim.dataset
+import helpers.sim.maps
 from helpers.__main__ import main
 from helpers.cli.outputs import DATASET_MARKER, RUN_MARKER
 from helpers.errors import SlamError
@@ -39,7 +40,8 @@ OLD_SITE_MARKER = "Written by python -m helpers site: the next build replaces th
 def tiny_flight(tmp_path):
     """Four waypoints over the default scene, as a CSV file."""
     path = tmp_path / "tiny.csv"
-    np.savetxt(path, np.column_stack([np.arange(-4.0, 4.0, 2.0), np.full(4, 10.0)]), delimiter=",", header="x,y")
+    xy = np.column_stack([np.arange(-4.0, 4.0, 2.0), np.full(4, 10.0)])
+    np.savetxt(path, xy, delimiter=",", header="x,y", comments="")  # the header is the file's first line
     return path
 
 
@@ -183,6 +185,38 @@ def test_a_dataset_folder_with_a_users_file_added_is_refused(tmp_path, tiny_data
         "sensor.toml",
     ]
     assert _hidden(tmp_path) == []
+
+
+def _fake_run(n=4):
+    """What write_run reads of a SLAM result: a config, two trajectories of ``n`` poses, their scans, a map."""
+    from types import SimpleNamespace
+
+    from helpers.config.tables import Config
+
+    poses = np.tile(np.eye(4), (n, 1, 1))
+    poses[:, 0, 3] = np.arange(n, dtype=float)
+    points = np.random.default_rng(0).uniform(-50, 50, (200, 3)).astype(np.float32)
+    return SimpleNamespace(
+        config=Config(), poses_odometry=poses, poses_optimized=poses, indices=np.arange(n) * 2, map_points=points
+    )
+
+
+RUN_FILES = ["config.toml", "map.laz", "map.ply", "metrics.json"]
+RUN_FILES += [f"trajectory_{name}.{ext}" for name in ("odometry", "optimized") for ext in ("csv", "kitti", "txt")]
+
+
+def test_a_run_folder_holds_its_maps_and_trajectories(tmp_path, grid_tile):
+    """TUM, KITTI and CSV trajectories, the map as PLY and LAZ (in the tile's coordinates), the truth's
+    trajectories only when there is truth; the marker lists every file."""
+    run = _fake_run()
+    frame = helpers.sim.maps.read_map(grid_tile("tile.las", 60.0, 60.0, lambda x, y: x * 0 + 5.0)).frame
+    out = helpers.cli.outputs.write_run(run, tmp_path / "run", {"n_scans": 4}, run.poses_optimized, frame=frame)
+    truth = [f"trajectory_gt.{ext}" for ext in ("csv", "kitti", "txt")]
+    assert sorted(p.name for p in out.iterdir()) == sorted([RUN_MARKER, *RUN_FILES, *truth])
+    assert set((out / RUN_MARKER).read_text().splitlines()[1:]) >= set(RUN_FILES + truth)
+    out = helpers.cli.outputs.write_run(run, out, {"n_scans": 4})  # no truth, no frame: replaces the earlier run
+    assert sorted(p.name for p in out.iterdir()) == sorted([RUN_MARKER, *RUN_FILES])
+    assert (out / "trajectory_optimized.csv").read_text().splitlines()[0] == "index,x,y,z,roll,pitch,yaw"
 
 
 def test_an_old_site_is_left_for_the_user_to_delete(tmp_path, one_notebook):

@@ -16,7 +16,7 @@ from helpers.config.files import config_to_dict, config_to_toml
 from helpers.config.tables import Config
 from helpers.quality.evaluation import grade_loops, map_errors, run_metrics
 from helpers.quality.trust import assess
-from helpers.sim.tum import read_tum
+from helpers.sim.trajectories import read_tum
 from helpers.slam.pipeline import Edge, Slam, build_pose_graph, run_slam
 
 SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3))  # a short loop has few submaps

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-EXAMPLE = "example: python -m helpers flight my_tile.laz --pattern survey --height 120 --out flight.csv"
+EXAMPLE = "example:\n  python -m helpers flight my_tile.laz --pattern survey --height 120 --out flight.csv"
 
 
 def add_parser(sub) -> None:
@@ -46,7 +46,7 @@ def run(args: argparse.Namespace) -> int:
         waypoints = survey_plan(field, args.height, overlap=args.overlap, spacing=args.spacing)
     else:
         waypoints = loop_plan(field, args.height, laps=args.laps, spacing=args.spacing)
-    check_coverage(field, waypoints)
+    check_coverage(field, waypoints, tile.frame)
     write_plan(out, waypoints, tile.frame)
     length = float(sum(((waypoints[1:, :2] - waypoints[:-1, :2]) ** 2).sum(axis=1) ** 0.5))
     print(f"{len(waypoints)} waypoints, {length / 1000:.2f} km, {args.height:g} m above the ground: written to {out}")

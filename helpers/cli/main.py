@@ -1,4 +1,4 @@
-"""Command line: ``python -m helpers dataset|run|flight|site ...`` (installed: ``aerial-lidar-slam``).
+"""Command line: python -m helpers dataset|run|flight|site ... (installed: aerial-lidar-slam).
 
 Errors in the input end in one line on stderr and exit code 2, never a
 traceback, and never a half-written output folder. The output folder is
@@ -9,26 +9,21 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
-import re
-import resource
 import signal
 import sys
 import threading
 import time
-from contextlib import contextmanager
 
 from helpers.cli import flight
+from helpers.cli.memory import stage as _stage
+from helpers.cli.own_scans import add_scan_arguments, run_on_scans, wants_scans
+from helpers.cli.terminal import Parser, StreamError, example, reason_lines, say, verdict
 from helpers.errors import SlamError
 
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM (a ``kill``, a job scheduler, a container stopping) raised as
     Ctrl-C is, so that what the command began is removed on the way out."""
-
-
-class StreamError(Exception):
-    """Standard output could not take the report (full, or closed) of a command whose outputs are written."""
 
 
 class _Lines(logging.Formatter):
@@ -73,7 +68,7 @@ def _main(argv=None) -> int:
 
             with _stage("building the book"):
                 index = build_site(args.out, execute=not args.no_execute)
-            _say(f"book written: {index}")
+            say(f"book written: {index}")
             return 0
     except SlamError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -91,47 +86,99 @@ def _main(argv=None) -> int:
     return 1
 
 
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m helpers", description=__doc__.splitlines()[0])
-    parser.add_argument("-v", "--verbose", action="store_true", help="log what each stage does")
-    sub = parser.add_subparsers(dest="command", required=True)
+DESCRIPTION = "Aerial lidar SLAM: simulate a flight's scans, run the SLAM on them, plan a flight, build the book."
+EXAMPLES = {  # one command each, shown in its --help and together in the program's
+    "dataset": "python -m helpers dataset --map my_tile.laz --waypoints flight.csv --out dataset",
+    "run": "python -m helpers run --map my_tile.laz --waypoints flight.csv --out my_run",
+    "run-scans": "python -m helpers run --scans my_scans --truth poses.txt --out my_run",
+    "flight": flight.EXAMPLE.splitlines()[-1].strip(),
+    "site": "python -m helpers site --out build/html",
+}
 
-    ds = sub.add_parser("dataset", help="simulate the lidar scans of a flight over a map")
+
+def _parser() -> argparse.ArgumentParser:
+    from helpers import __version__
+
+    parser = Parser(prog="python -m helpers", description=DESCRIPTION, epilog=example(*EXAMPLES.values()))
+    parser.add_argument("--version", action="version", version=f"aerial-lidar-slam-helpers {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log what each stage does")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="{dataset,run,flight,site}")
+    _dataset_parser(sub)
+    _run_parser(sub)
+    flight.add_parser(sub)
+    _site_parser(sub)
+    return parser
+
+
+def _dataset_parser(sub) -> argparse.ArgumentParser:
+    ds = sub.add_parser(
+        "dataset",
+        help="simulate the lidar scans of a flight over a map",
+        description="Simulate the lidar scans of a flight over a map and write them with the true poses and map.",
+        epilog=example(EXAMPLES["dataset"]),
+    )
     _map_arguments(ds)
     ds.add_argument("--out", required=True, help="output folder (scans/, poses_gt.txt, map_gt.ply)")
+    return ds
 
-    flight.add_parser(sub)
 
-    run = sub.add_parser("run", help="create the dataset and run the whole SLAM pipeline on it")
+def _run_parser(sub) -> argparse.ArgumentParser:
+    """The ``run`` subcommand; each set of its options is added by one call."""
+    run = sub.add_parser(
+        "run",
+        help="run the whole SLAM pipeline on a simulated flight, or on your own scans (--scans DIR)",
+        description="Simulate a flight's scans, or read your own (--scans DIR), and run the whole SLAM pipeline on "
+        "them: odometry, loop closures, the pose graph, the map, graded against the truth when there is one. The "
+        "last line says whether the result is trusted.",
+        epilog=example(EXAMPLES["run"], EXAMPLES["run-scans"]),
+    )
     _map_arguments(run)
-    run.add_argument("--out", required=True, help="output folder (metrics.json, trajectories, map.ply)")
+    run.add_argument("--out", required=True, help="output folder (metrics.json, trajectories, map.laz, map.ply)")
     run.add_argument(
         "--reference-values",
         action="store_true",
         help="keep the configured values (by default the geometry-dependent ones the config file does not set "
         "are fitted to the flight's height and waypoint spacing: helpers.slam.flight_fit)",
     )
-    run.add_argument(
+    _gnss_arguments(run)
+    add_scan_arguments(run)
+    return run
+
+
+def _gnss_arguments(parser: argparse.ArgumentParser) -> None:
+    gnss = parser.add_argument_group("GNSS")
+    gnss.add_argument(
         "--gnss",
         metavar="FILE",
         help="GNSS positions per scan, map frame (.csv index,x,y,z or TUM .txt/.tum, t = scan index), added to "
         "the pose graph as GPS factors",
     )
-    run.add_argument(
+    gnss.add_argument(
         "--gnss-sigma",
         metavar="H[,V]",
         help="sigma of a GNSS position, metres, horizontal[,vertical] (default: the [sensor] gnss sigmas)",
     )
 
-    site = sub.add_parser("site", help="execute the notebooks and build them into a book that opens from disk")
+
+def _site_parser(sub) -> argparse.ArgumentParser:
+    site = sub.add_parser(
+        "site",
+        help="execute the notebooks and build them into a book that opens from disk",
+        description="Execute the tutorial's notebooks and build them into an HTML book that opens from disk.",
+        epilog=example(EXAMPLES["site"]),
+    )
     site.add_argument("--out", default="build/html", help="output folder (default: build/html)")
     site.add_argument("--no-execute", action="store_true", help="export the notebooks as committed")
-    return parser
+    return site
 
 
 def _map_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", help=".las, .laz or .tar.gz holding one (default: the embedded scene)")
-    parser.add_argument("--waypoints", help=".mat with gTruthTraj or .csv of x,y[,z] (default: a loop)")
+    parser.add_argument(
+        "--waypoints",
+        help=".mat with gTruthTraj, or .csv with columns x, y and optionally z, named in a header or in that "
+        "order (default: a loop)",
+    )
     parser.add_argument("--config", help="TOML file with a table per stage: [sensor], [features], [registration], ...")
 
 
@@ -149,7 +196,7 @@ def _dataset(args) -> int:
     with _stage("writing the dataset"):
         out = write_dataset(data, args.out, progress=sys.stderr.isatty())
     points = sum(len(s) for s in data.scans)
-    _say(
+    say(
         f"{len(data)} scans ({points / len(data):.0f} points each on average) of {data.name} "
         f"written to {out} in {time.perf_counter() - start:.1f} s",
         written=out,
@@ -158,18 +205,21 @@ def _dataset(args) -> int:
 
 
 def _run(args) -> int:
+    if wants_scans(args):  # --scans DIR: your own scans, not simulated ones (--truth etc. without it: error)
+        return run_on_scans(args)
     from helpers.cli.outputs import RUN_LEGACY_MARKER, RUN_MARKER, write_run
     from helpers.config.files import given_keys, load_config
     from helpers.outdir import check_output_place
     from helpers.quality.evaluation import map_errors, run_metrics
     from helpers.quality.trust import assess
     from helpers.sim.dataset import create_dataset
+    from helpers.sim.gnss import read_fixes
     from helpers.slam.flight_fit import check_grid_steps, fit_to_flight, flight_of
     from helpers.slam.pipeline import run_slam
 
     check_output_place(args.out, RUN_MARKER, RUN_LEGACY_MARKER)
     config = load_config(args.config)
-    gnss = _gnss(args, config)
+    gnss = read_fixes(args.gnss, args.gnss_sigma, config.sensor)
     start = time.perf_counter()
     interactive = sys.stderr.isatty()
     with _stage("creating the dataset"):
@@ -178,13 +228,13 @@ def _run(args) -> int:
     if gnss is not None:
         gnss.check_flight(len(data), args.gnss)
         sigma = ", ".join(f"{v:g}" for v in gnss.sigmas[1:])
-        _say(f"GNSS: {len(gnss.indices)} positions from {args.gnss}, sigma {sigma} m (horizontal, vertical)")
+        say(f"GNSS: {len(gnss.indices)} positions from {args.gnss}, sigma {sigma} m (horizontal, vertical)")
     flight = flight_of(data)
     if not args.reference_values:
         config, reasons = fit_to_flight(flight, config, given_keys(args.config), gnss=gnss is not None)
     check_grid_steps(flight, config)  # before a word about the fit: a refused run prints only its error
     if not args.reference_values:
-        _say(
+        say(
             f"parameters fitted to the flight ({flight.height:.0f} m above the ground, a waypoint every "
             f"{flight.spacing:.1f} m; --reference-values keeps the reference's):",
             *(f"  {line}" for line in reasons),
@@ -196,70 +246,15 @@ def _run(args) -> int:
         health = assess(result)
         m = run_metrics(data, result, map_errors(result.map_points, data.map_points), health)
     with _stage("writing the run"):
-        out = write_run(result, args.out, m, data.poses[result.indices])
-    if not health.trusted:  # first: a report that cannot be printed must not take the warning with it
-        print(f'warning: {health.warning()} (metrics.json: "trusted": false)', file=sys.stderr)
-    _say(
+        out = write_run(result, args.out, m, data.poses[result.indices], frame=data.frame)
+    for problem in health.problems:  # first: a report that cannot be printed must not take the warnings with it
+        print(*reason_lines(problem), sep="\n", file=sys.stderr)
+    say(
         f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
         f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "
         f"{m['ate_rmse_optimized_m']:.2f} m (optimised); {m['runtime_s']['total']:.0f} s; written to {out}",
         health.summary(),
+        verdict(health.problems),
         written=out,
     )
     return 0
-
-
-def _say(*lines: str, written=None) -> None:
-    """Print ``lines`` on standard output now; a :class:`StreamError` if it cannot take them (full, closed),
-    saying whether the command's outputs (``written``) are already whole."""
-    try:
-        print("\n".join(lines), flush=True)
-    except OSError as exc:
-        if sys.stdout is sys.__stdout__:  # what stays in its buffer goes nowhere at exit, instead of a traceback
-            devnull = os.open(os.devnull, os.O_WRONLY)
-            os.dup2(devnull, sys.stdout.fileno())
-            os.close(devnull)
-        if written is None:
-            raise SlamError(f"cannot write to standard output: {exc.strerror or exc}") from None
-        raise StreamError(f"{exc.strerror or exc}; {written} was written in full") from None
-
-
-@contextmanager
-def _stage(step: str):
-    """Out of memory within ``step`` (Python's or numpy's MemoryError, a library's "out of memory") as one
-    :class:`SlamError` naming the step, what it asked for when known, and the memory in use and allowed."""
-    try:
-        yield
-    except (MemoryError, RuntimeError) as exc:
-        text = re.sub(r"\x1b\[[0-9;]*[A-Za-z]", "", str(exc))  # Open3D colours its messages
-        if isinstance(exc, RuntimeError) and not re.search(r"out of memory|bad_alloc|cannot allocate", text, re.I):
-            raise
-        from helpers.config.bounds import human_size
-
-        asked = getattr(exc, "_total_size", None)  # numpy's _ArrayMemoryError knows it
-        asked = f"{human_size(asked)} more" if asked else "more memory"
-        in_use = human_size(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)  # Linux: kB
-        limit = resource.getrlimit(resource.RLIMIT_AS)[0]
-        allowed = "" if limit == resource.RLIM_INFINITY else f" under a limit of {human_size(limit)} (ulimit -v)"
-        raise SlamError(
-            f"out of memory while {step}: it asked for {asked} with up to {in_use} in use{allowed}; "
-            "free memory, raise the limit, or give a smaller map or flight"
-        ) from None
-
-
-def _gnss(args, config):
-    """The GNSS fixes ``--gnss`` names, each with the sigma of ``--gnss-sigma`` or else of ``[sensor]``."""
-    if args.gnss is None:
-        if args.gnss_sigma is not None:
-            raise SlamError("--gnss-sigma needs --gnss FILE (the positions it is the sigma of)")
-        return None
-    from helpers.sim.gnss import parse_sigma, read_gnss
-
-    if args.gnss_sigma is not None:
-        sigmas = parse_sigma(args.gnss_sigma)
-    elif config.sensor.gnss:
-        horizontal, vertical = config.sensor.gnss_sigma_horizontal, config.sensor.gnss_sigma_vertical
-        sigmas = [horizontal, horizontal, vertical]
-    else:
-        raise SlamError("--gnss needs the positions' sigma: --gnss-sigma H[,V] (m) or [sensor] gnss sigmas")
-    return read_gnss(args.gnss, sigmas)

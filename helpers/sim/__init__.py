@@ -7,7 +7,7 @@
 - :mod:`~helpers.sim.sensor`: the lidar's rays, cast on the surface;
 - :mod:`~helpers.sim.dataset`: the reference's ``helperCreateDataset``: a scan per waypoint, the true poses;
 - :mod:`~helpers.sim.gnss`: simulated position fixes, and GNSS files read;
-- :mod:`~helpers.sim.ply`, :mod:`~helpers.sim.tum`: the point and pose files the simulator writes;
+- :mod:`~helpers.sim.ply`, :mod:`~helpers.sim.trajectories`: the point and pose files the simulator writes;
 - :mod:`~helpers.sim.reference_files`: the default flight in the reference's own file formats (``data/``).
 """
 

@@ -140,15 +140,16 @@ def create_dataset(
         tile = read_map(map_path)
         field, frame, name = height_field_from_points(tile.points, tile.labels, MAP_CELL), tile.frame, tile.source
 
+    given = None  # the frame of a waypoint file's coordinates, for errors in its own units
     if waypoints_path is not None:
-        xyz = _to_map_frame(read_waypoints(waypoints_path), frame, field, sensor)
+        xyz, given = _to_map_frame(read_waypoints(waypoints_path), frame, field, sensor)
     elif map_path is None:
         xyz = _with_altitude(read_waypoints(DEFAULT_WAYPOINTS), sensor)
     else:
         xyz = _with_altitude(fitted_loop(field), sensor)
 
-    check_coverage(field, xyz)
-    check_heights(field, xyz)
+    check_coverage(field, xyz, given)
+    check_heights(field, xyz, given)
     sensor.check_flight(len(xyz))
     poses = poses_from_waypoints(xyz)
     surface = Surface.from_height_field(field)
@@ -195,10 +196,14 @@ def _with_altitude(points: np.ndarray, sensor: SensorConfig) -> np.ndarray:
     return np.column_stack([points[:, :2], np.full(len(points), sensor.altitude)])
 
 
-def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, sensor: SensorConfig) -> np.ndarray:
+def _to_map_frame(
+    points: np.ndarray, frame: MapFrame, field: HeightField, sensor: SensorConfig
+) -> tuple[np.ndarray, MapFrame]:
     """Waypoints given in the map's original coordinates move with the map;
     waypoints that already lie in the centred map frame are taken as they
-    are (whichever reading leaves fewer of them outside the map)."""
+    are (whichever reading leaves fewer of them outside the map). Returns them
+    and the frame they were read in (``frame``, or the centred metric one), in
+    whose coordinates and units an error about them speaks."""
     xmin, xmax, ymin, ymax = field.bounds
 
     def outside(xy):
@@ -209,4 +214,5 @@ def _to_map_frame(points: np.ndarray, frame: MapFrame, field: HeightField, senso
     if xy is not moved:
         log.info("waypoints already lie in the centred map frame: taken as they are")
     z = points[:, 2] * frame.scale_z if points.shape[1] == 3 else np.full(len(points), sensor.altitude)
-    return np.column_stack([xy, z])
+    given = frame if xy is moved else IDENTITY_FRAME
+    return np.column_stack([xy, z]), given

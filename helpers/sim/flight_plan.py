@@ -182,7 +182,5 @@ def _check(height: float, spacing: float) -> None:
 def write_plan(path: str | Path, waypoints: np.ndarray, frame: MapFrame) -> None:
     """Write map-frame ``waypoints`` (N, 3) as a CSV ``x,y,z`` in the tile's own coordinates and units, all
     or nothing."""
-    xy = np.asarray(waypoints[:, :2], dtype=float) / frame.scale_xy + np.asarray(frame.offset)
-    z = np.asarray(waypoints[:, 2], dtype=float) / frame.scale_z
-    rows = np.column_stack([xy, z])
+    rows = frame.to_tile(waypoints)
     write_atomically(path, lambda f: np.savetxt(f, rows, fmt="%.3f", delimiter=",", header="x,y,z", comments=""))

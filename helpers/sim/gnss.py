@@ -140,3 +140,19 @@ def _is_number(text: str) -> bool:
     except ValueError:
         return False
     return True
+
+
+def read_fixes(path, sigma_text: str | None, sensor) -> GnssFixes | None:
+    """The fixes of GNSS file ``path`` (None: none), each with the sigma ``sigma_text`` gives ("H[,V]" m) or
+    else the ``sensor``'s (a :class:`helpers.config.SensorConfig`) GNSS sigmas, as the command line takes them."""
+    if path is None:
+        if sigma_text is not None:
+            raise SlamError("--gnss-sigma needs --gnss FILE (the positions it is the sigma of)")
+        return None
+    if sigma_text is not None:
+        sigmas = parse_sigma(sigma_text)
+    elif sensor.gnss:
+        sigmas = [sensor.gnss_sigma_horizontal, sensor.gnss_sigma_horizontal, sensor.gnss_sigma_vertical]
+    else:
+        raise SlamError("--gnss needs the positions' sigma: --gnss-sigma H[,V] (m) or [sensor] gnss sigmas")
+    return read_gnss(path, sigmas)

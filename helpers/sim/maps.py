@@ -3,7 +3,10 @@
 The map is moved into the *map frame* the whole project works in: metres,
 centred on the XY mid-point of the tile (as the reference does), heights
 kept as they are (only converted to metres). Units come from the LAS
-header's GeoTIFF keys or WKT, never assumed.
+header's GeoTIFF keys or WKT, never assumed. The tile's coordinate-system
+records travel with the frame (:class:`CrsRecord`), so that what is made in
+the map frame can be written back in the tile's own system
+(:mod:`helpers.sim.map_laz`).
 """
 
 from __future__ import annotations
@@ -33,18 +36,45 @@ MAX_MAP_CELLS = 50_000_000  # cells of the height field built from a tile: 50 km
 CELL_BYTES = 60  # memory a cell takes while the height field is built (heights, labels, hole filling)
 
 
+CRS_USER_ID = "LASF_Projection"  # the user id of the LAS coordinate-system records
+WKT_RECORDS = (2112, 2111)  # OGC coordinate system WKT, OGC math transform WKT
+GEOTIFF_RECORDS = (34735, 34736, 34737)  # GeoKeyDirectoryTag, GeoDoubleParamsTag, GeoAsciiParamsTag
+
+
+@dataclass(frozen=True)
+class CrsRecord:
+    """One coordinate-system record of a tile's header (a ``LASF_Projection`` VLR or EVLR), kept as its bytes."""
+
+    record_id: int
+    description: str
+    data: bytes
+
+    @property
+    def is_wkt(self) -> bool:
+        return self.record_id in WKT_RECORDS
+
+
 @dataclass(frozen=True)
 class MapFrame:
     """How original map coordinates become map-frame metres:
-    ``xy_m = (xy - offset) * scale_xy`` and ``z_m = z * scale_z``."""
+    ``xy_m = (xy - offset) * scale_xy`` and ``z_m = z * scale_z``; ``crs``: the
+    tile's coordinate-system records (none for the embedded scene or a tile without them)."""
 
     offset: tuple[float, float]
     scale_xy: float
     scale_z: float
     unit_name: str
+    crs: tuple[CrsRecord, ...] = ()
 
     def to_map(self, xy: np.ndarray) -> np.ndarray:
         return (np.asarray(xy, np.float64)[:, :2] - np.asarray(self.offset)) * self.scale_xy
+
+    def to_tile(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) map-frame metres -> the tile's own coordinates and units (the inverse of :meth:`to_map`
+        and of ``z_m = z * scale_z``)."""
+        points = np.asarray(points, np.float64).reshape(-1, 3)
+        xy = points[:, :2] / self.scale_xy + np.asarray(self.offset)
+        return np.column_stack([xy, points[:, 2] / self.scale_z])
 
 
 IDENTITY_FRAME = MapFrame((0.0, 0.0), 1.0, 1.0, "metre")
@@ -95,7 +125,7 @@ def _read_las(path: Path) -> AerialMap:
     if len(xyz) == 0:
         raise SlamError(f"{path.name} holds no finite points")
     lo, hi = xyz[:, :2].min(axis=0), xyz[:, :2].max(axis=0)
-    frame = MapFrame(tuple(float(v) for v in (lo + hi) / 2), xy_unit, z_unit, unit_name)
+    frame = MapFrame(tuple(float(v) for v in (lo + hi) / 2), xy_unit, z_unit, unit_name, _crs_records(header))
     points = np.column_stack([frame.to_map(xyz), xyz[:, 2] * z_unit])
     classes = np.asarray(data.classification)[finite]
     labels = np.full(len(points), GROUND, np.uint8)
@@ -103,6 +133,15 @@ def _read_las(path: Path) -> AerialMap:
         labels[classes == code] = label
     log.info("read %d points from %s (units: %s)", len(points), path.name, unit_name)
     return AerialMap(points, labels, frame, path.name)
+
+
+def _crs_records(header) -> tuple[CrsRecord, ...]:
+    """The header's coordinate-system records (VLRs, then EVLRs), as the tile has them."""
+    return tuple(
+        CrsRecord(vlr.record_id, vlr.description, bytes(vlr.record_data_bytes()))
+        for vlr in list(header.vlrs) + list(header.evlrs or [])
+        if vlr.user_id == CRS_USER_ID
+    )
 
 
 def _units(header) -> tuple[float, float, str]:

@@ -167,28 +167,40 @@ def labels_at(field: HeightField, points: np.ndarray) -> np.ndarray:
     return field.labels[field.cell_of(points)]
 
 
-def check_coverage(field: HeightField, waypoints: np.ndarray) -> None:
-    """Refuse waypoints whose XY lies outside the surface, naming them."""
+def check_coverage(field: HeightField, waypoints: np.ndarray, frame=None) -> None:
+    """Refuse waypoints whose XY lies outside the surface, naming them; the map's bounds in the coordinates and
+    units of the waypoints' file when its ``frame`` (:class:`helpers.sim.maps.MapFrame`) is given."""
     xmin, xmax, ymin, ymax = field.bounds
     x, y = waypoints[:, 0], waypoints[:, 1]
     outside = np.flatnonzero((x < xmin) | (x > xmax) | (y < ymin) | (y > ymax))
     if len(outside):
+        if frame is not None:
+            (xmin, ymin, _), (xmax, ymax, _) = frame.to_tile(np.array([[xmin, ymin, 0.0], [xmax, ymax, 0.0]]))
+        unit = unit_symbol(frame)
         raise SlamError(
             f"{len(outside)} of {len(waypoints)} waypoints leave the map "
-            f"(x {xmin:.1f}..{xmax:.1f} m, y {ymin:.1f}..{ymax:.1f} m): indices {index_ranges(outside)}"
+            f"(x {xmin:.1f}..{xmax:.1f} {unit}, y {ymin:.1f}..{ymax:.1f} {unit}): indices {index_ranges(outside)}"
         )
 
 
-def check_heights(field: HeightField, waypoints: np.ndarray) -> None:
+def unit_symbol(frame=None) -> str:
+    """The symbol of a map frame's unit ("m" without one)."""
+    name = "metre" if frame is None else frame.unit_name
+    return {"metre": "m", "foot": "ft", "US survey foot": "US survey ft"}.get(name, name)
+
+
+def check_heights(field: HeightField, waypoints: np.ndarray, frame=None) -> None:
     """Refuse waypoints (N, 3) at or below the surface under them, naming
     them: a lidar under the ground sees nothing, or the surface's underside
-    in a valley beyond, and either way no scan of the map."""
+    in a valley beyond, and either way no scan of the map. ``frame`` as :func:`check_coverage` takes it."""
     ground = field.z[field.cell_of(waypoints)]
+    scale = 1.0 if frame is None else frame.scale_z  # the surface's height in the waypoints' file's units
     below = np.flatnonzero(waypoints[:, 2] <= ground)
     if len(below):
         raise SlamError(
             f"{len(below)} of {len(waypoints)} waypoints lie at or below the map's surface (indices "
-            f"{index_ranges(below)}; the surface under them reaches {ground[below].max():.1f} m): fly higher "
+            f"{index_ranges(below)}; the surface under them reaches {ground[below].max() / scale:.1f} "
+            f"{unit_symbol(frame)}): fly higher "
             "([sensor] altitude, or the waypoints' z)"
         )
 

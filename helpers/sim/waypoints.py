@@ -8,6 +8,7 @@ scale (see :func:`helpers.sim.maps.MapFrame`).
 
 from __future__ import annotations
 
+import re
 import struct
 import zlib
 from pathlib import Path
@@ -33,6 +34,7 @@ MI_MATRIX, MI_COMPRESSED = 14, 15  # MAT-file v5 data types: a matrix, a zlib-co
 # A CSV line of three numbers of full double precision ("-1234567.123456789012,...") takes under 100 bytes:
 # a larger file holds more waypoints than a flight may have, and is refused before it is read into memory.
 MAX_CSV_BYTES = 100 * MAX_WAYPOINTS
+AXIS_NAME = re.compile(r"([xyz])(?:[\s_(\[].*)?")  # a waypoint CSV's column: x, y or z, then maybe a unit
 MAT_HEAD_BYTES = 1024  # of a matrix element: its flags, dimensions and name (a 63-character name, 200 dimensions)
 
 
@@ -69,7 +71,7 @@ def loop_waypoints(
 
 def read_waypoints(path: str | Path) -> np.ndarray:
     """Read waypoints from ``.mat`` (``gTruthTraj``, N x 2 or N x 3) or
-    ``.csv`` (x,y[,z] per line, an optional header line). Returns (N, 2|3)."""
+    ``.csv`` (x,y[,z] per line, or the columns a header names). Returns (N, 2|3)."""
     path = input_file(path, "waypoints file")
     suffix = path.suffix.lower()
     if suffix == ".mat":
@@ -182,8 +184,9 @@ def _matrix_header(element: bytes, order: str) -> tuple[str, tuple[int, ...], st
 
 
 def _read_csv(path: Path) -> np.ndarray:
-    """x,y[,z] rows; a first row that holds no number is a header. Any other
-    row that is not numbers is an error naming its line: none is dropped."""
+    """Rows of numbers separated by commas, or by semicolons; a first row that holds no number is a header
+    naming the columns x, y and optionally z, in any order and any case (no header: x,y[,z] in that order).
+    Any other row that is not numbers is an error naming its line: none is dropped."""
     size = path.stat().st_size
     if size > MAX_CSV_BYTES:
         raise SlamError(
@@ -192,22 +195,41 @@ def _read_csv(path: Path) -> np.ndarray:
         )
     text = path.read_text(encoding="utf-8-sig", errors="replace")  # utf-8-sig: a byte-order mark is not data
     lines = [(number, line.strip()) for number, line in enumerate(text.splitlines(), 1) if line.strip()]
-    if lines and not any(_is_number(cell) for cell in lines[0][1].split(",")):
-        lines = lines[1:]  # a header such as "x,y,z"
+    separator = ";" if lines and ";" in lines[0][1] and "," not in lines[0][1] else ","
+    order = None
+    if lines and not any(_is_number(cell) for cell in lines[0][1].split(separator)):
+        order = _header_order(path, lines[0][1].split(separator))  # a header such as "x,y,z" or "Y;X"
+        lines = lines[1:]
     if not lines:
         return np.empty((0, 2))
     _check_count(path, len(lines))
     rows = []
     for number, line in lines:
         try:
-            rows.append([_number(v) for v in line.split(",")])
+            rows.append([_number(v) for v in line.split(separator)])
         except ValueError:
             raise SlamError(
-                f"{path.name} line {number}: every line must be x,y or x,y,z numbers, got {line[:40]!r}"
+                f"{path.name} line {number}: every line must be x,y or x,y,z numbers (separated by "
+                f"{'semicolons' if separator == ';' else 'commas'}), got {line[:40]!r}"
             ) from None
-    if len({len(r) for r in rows}) > 1:
+    if len({len(r) for r in rows} | ({len(order)} if order else set())) > 1:
         raise SlamError(f"{path.name}: lines have different numbers of columns")
-    return np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+    points = np.array(rows, dtype=np.float64).reshape(len(rows), -1)
+    return points if order is None else points[:, order]
+
+
+def _header_order(path: Path, names: list[str]) -> list[int]:
+    """The columns of x, y and z (when named) from a header's names: any case, quotes and spaces aside, and a
+    unit after the letter allowed ("x_m", "X (ft)")."""
+    found = [name.strip().strip("\"'").strip() for name in names]
+    keys = [axis.group(1) if (axis := AXIS_NAME.fullmatch(name.lower())) else name for name in found]
+    if sorted(keys) not in (["x", "y"], ["x", "y", "z"]):
+        raise SlamError(
+            f"{path.name}: the header names the columns {', '.join(repr(n) for n in found)}; a waypoint CSV's "
+            "header names x and y, and optionally z (in any order and any case), or the file has no header "
+            "and its columns are x,y[,z]"
+        )
+    return [keys.index(axis) for axis in ("x", "y", "z") if axis in keys]
 
 
 def _check_shape(path: Path, shape: tuple[int, ...]) -> None:

@@ -1,0 +1,70 @@
+"""What the command line prints for people: its help, wrapped to the terminal with the examples kept whole so
+that they can be copied; a run's verdict, each reason of the trust flag on lines of its own; and a
+command's report, which must reach standard output (:func:`say`)."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import sys
+
+from helpers.errors import SlamError
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's help, each line of a description or epilog wrapped on its own; an indented line (an example
+    command) is kept whole."""
+
+    def _fill_text(self, text: str, width: int, indent: str) -> str:
+        return "\n".join(
+            indent + line if line.startswith(" ") else super(HelpFormatter, self)._fill_text(line, width, indent)
+            for line in text.splitlines()
+        )
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser whose help, and its subcommands' (they are made of the same class), uses
+    :class:`HelpFormatter`."""
+
+    def __init__(self, *args, formatter_class=HelpFormatter, **kwargs):
+        super().__init__(*args, formatter_class=formatter_class, **kwargs)
+
+
+def example(*commands: str) -> str:
+    """An epilog of example commands, one a line."""
+    return ("example:\n" if len(commands) == 1 else "examples:\n") + "\n".join(f"  {c}" for c in commands)
+
+
+def reason_lines(problem: str) -> list[str]:
+    """A reason of the trust flag as short lines: what went wrong on a ``warning:`` line of its own, then its
+    likely cause and what to change, a sentence a line, indented under it."""
+    what, *rest = re.split(r"(?<=\.)\s+(?=[A-Z])", problem.strip())
+    return [f"warning: not trusted: {what}", *(f"  {sentence}" for sentence in rest)]
+
+
+def verdict(problems: list[str]) -> str:
+    """A run's last line: whether its result can be trusted (the reasons are the warnings before it)."""
+    if not problems:
+        return "trusted"
+    reasons = f"{len(problems)} reason{'s' if len(problems) > 1 else ''}"
+    return f'not trusted: {reasons} in the warnings above (metrics.json: "trusted": false)'
+
+
+class StreamError(Exception):
+    """Standard output could not take the report (full, or closed) of a command whose outputs are written."""
+
+
+def say(*lines: str, written=None) -> None:
+    """Print ``lines`` on standard output now; a :class:`StreamError` if it cannot take them (full, closed),
+    saying whether the command's outputs (``written``) are already whole."""
+    try:
+        print("\n".join(lines), flush=True)
+    except OSError as exc:
+        if sys.stdout is sys.__stdout__:  # what stays in its buffer goes nowhere at exit, instead of a traceback
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+        if written is None:
+            raise SlamError(f"cannot write to standard output: {exc.strerror or exc}") from None
+        raise StreamError(f"{exc.strerror or exc}; {written} was written in full") from None
