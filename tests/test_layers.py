@@ -190,3 +190,15 @@ def test_the_notebooks_import_few_module_paths():
                 paths |= set(re.findall(r"^\s*from\s+(helpers[\w.]*)\s+import", source, re.M))
                 paths |= set(re.findall(r"^\s*import\s+(helpers[\w.]*)", source, re.M))
     assert "helpers" in paths and len(paths) <= 12, sorted(paths)
+
+
+def test_the_distribution_ships_every_layer():
+    """pyproject.toml's package discovery finds every package folder, so an installed copy has them all."""
+    import tomllib
+
+    from setuptools import find_packages
+
+    pyproject = tomllib.loads((PACKAGE.parent / "pyproject.toml").read_text())
+    found = set(find_packages(str(PACKAGE.parent), **pyproject["tool"]["setuptools"]["packages"]["find"]))
+    folders = {module_name(p, PACKAGE) for p in PACKAGE.rglob("__init__.py")}
+    assert folders and folders <= found, sorted(folders - found)
