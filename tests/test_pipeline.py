@@ -284,9 +284,9 @@ def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flig
         read.append((index, threading.current_thread().name))
         return real_prepare(scan, index, config)
 
-    def spy_process(self, scan, index, prepared=None):
+    def spy_process(self, scan, index, prepared=None, times=None):
         processed.append(index)
-        return real_process(self, scan, index, prepared)
+        return real_process(self, scan, index, prepared, times)
 
     monkeypatch.setattr(helpers.slam.pipeline, "prepare_scan", spy_prepare)
     monkeypatch.setattr(Slam, "process", spy_process)

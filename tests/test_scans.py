@@ -274,3 +274,29 @@ def test_a_bad_scan_folder_is_one_error_line_on_the_command_line(tmp_path, capsy
     assert main(["run", "--scans", str(tmp_path / "scans"), "--out", str(tmp_path / "out")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("error:") and not (tmp_path / "out").exists()
+
+
+def test_scans_with_per_point_times_are_deskewed_with_the_last_motion(two_steps, tmp_path, monkeypatch):
+    """Every accepted scan from the third on (the first step measures the motion) is deskewed with the
+    odometry's last step, one period of it; times that all fall at one instant move nothing, so the
+    trajectory is the one without times."""
+    import helpers.slam.slam as slam_module
+
+    data, _, _ = two_steps
+    calls = []
+    real = slam_module.deskew
+    monkeypatch.setattr(slam_module, "deskew", lambda p, t, m: calls.append((len(p), t.copy(), m)) or real(p, t, m))
+    runs = {}
+    for name, with_times in (("plain", False), ("timed", True)):
+        folder = tmp_path / name
+        folder.mkdir()
+        for k in range(24):
+            points = read_scan(data / "scans" / f"{k:06d}.ply")[0]
+            write_pcd(folder / f"{k:06d}.pcd", points, np.full(len(points), 7.0) if with_times else None)
+        out = tmp_path / f"R-{name}"
+        assert main(["run", "--scans", str(folder), "--config", str(data / "sensor.toml"), "--out", str(out)]) == 0
+        runs[name] = read_tum(out / "trajectory_optimized.txt")[1]
+    accepted = len(runs["timed"])
+    assert len(calls) == accepted - 2 and all(np.all(t == 0.5) for _, t, _ in calls)
+    assert all(m.shape == (4, 4) and np.linalg.norm(m[:3, 3]) > 0.5 for _, _, m in calls)  # a step of ~2 m a scan
+    np.testing.assert_array_equal(runs["timed"], runs["plain"])

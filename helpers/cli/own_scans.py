@@ -94,7 +94,8 @@ def run_on_scans(args) -> int:
     read = time.perf_counter() - start
     interactive = sys.stderr.isatty()
     with _stage("running SLAM"):
-        result = run_slam(data, config, progress=interactive, gnss=gnss)
+        times = data.scans.times if data.scans.has_times else None
+        result = run_slam(data, config, progress=interactive, gnss=gnss, times=times)
     result.runtime_s = {"reading": read, **result.runtime_s}
     with _stage("evaluating the run"):
         health = assess(result)
@@ -151,7 +152,7 @@ def _prepare(args):
         config, reasons = fit_to_flight(flight, config, given_keys(args.config), gnss=gnss is not None)
     check_grid_steps(flight, config)  # before a word about the fit: a refused run prints only its error
     skipped = f", {len(folder.skipped)} skipped" if folder.skipped else ""
-    times = " (per-point times read, not used: no deskew yet)" if folder.has_times else ""
+    times = " (per-point times: each scan deskewed with the last motion)" if folder.has_times else ""
     say(f"{len(folder)} {folder.format} scans in {args.scans}{skipped}{times}")
     if not reference:
         say(
@@ -286,7 +287,7 @@ def scan_metrics(data: ScanDataset, result, health, folder, args) -> dict:
         "n_skipped": len(folder.skipped),
         "skipped": folder.skipped,
         "n_nonfinite_points_dropped": folder.nonfinite,
-        "per_point_times": folder.has_times,  # read, not used yet (deskew: another issue)
+        "per_point_times": folder.has_times,  # each scan deskewed with the odometry's last motion
     }
     if data.truth:
         return {**run_metrics(data, result, None, health), "truth": str(args.truth), "scans": scans}

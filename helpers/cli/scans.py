@@ -60,12 +60,21 @@ class ScanFolder(Sequence):
 
     def __post_init__(self):
         self.kept = self.kept or list(range(len(self.files)))
+        self._times_of, self._times = None, None  # the scan read last and its per-point times
 
     def __len__(self) -> int:
         return len(self.kept)
 
     def __getitem__(self, index: int) -> np.ndarray:
-        return self.read(index)[0]
+        points, self._times = self.read(index)  # kept for times(index): the scan read last, not re-read
+        self._times_of = index
+        return points
+
+    def times(self, index: int) -> np.ndarray | None:
+        """Scan ``index``'s per-point times (None without): the scan read last, or read again."""
+        if self._times_of == index:
+            return self._times
+        return self.read(index)[1]
 
     def read(self, index: int) -> tuple[np.ndarray, np.ndarray | None]:
         """Scan ``index``'s finite points (N, 3, float64) and their per-point times (N,), or None where the file

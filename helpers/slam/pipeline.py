@@ -32,6 +32,7 @@ def run_slam(
     progress: bool = False,
     odometry: OdometryResult | None = None,
     gnss=None,
+    times=None,
 ) -> SlamResult:
     """Estimate the trajectory and the map from ``dataset.scans`` alone (the
     first ground-truth pose anchors the first node, as in the reference; no
@@ -43,7 +44,9 @@ def run_slam(
     registers its edges back in a helper process while the next scan is
     registered (:mod:`helpers.slam.edges_back`), and a run in global mode reads
     and prepares the next accepted scan in a thread while this one is
-    registered (:func:`helpers.slam.preprocess.reads_ahead`): the same result, sooner."""
+    registered (:func:`helpers.slam.preprocess.reads_ahead`): the same result, sooner. ``times``: a
+    function of the scan index giving its per-point times (or None): each scan is then deskewed with the
+    last motion (:mod:`helpers.slam.deskew`), and read after the step before it."""
     config = config or Config()
     skip = config.registration.skip_frames
     nodes = len(odometry.indices) if odometry is not None else -(-len(dataset) // skip)
@@ -51,7 +54,7 @@ def run_slam(
     slam = Slam(config, anchor=dataset.poses[0], odometry=odometry, gnss=gnss, background=background)
     bar = progress_bar(len(dataset), "slam", enabled=progress)
     loops, following = 0, None  # following: the future of the next accepted scan (index + skip), prepared meanwhile
-    reading = odometry is None and reads_ahead(config)
+    reading = odometry is None and reads_ahead(config) and times is None
 
     def read_and_prepare(index: int):
         return prepare_scan(dataset.scans[index], index, config)
@@ -63,7 +66,8 @@ def run_slam(
                 scan = dataset.scans[index] if prepared is None else None
                 if reading and index + skip < len(dataset):
                     following = ahead.submit(read_and_prepare, index + skip)
-                loops += slam.process(scan, index, prepared).loop is not None
+                stamps = None if times is None else times(index)
+                loops += slam.process(scan, index, prepared, times=stamps).loop is not None
                 bar.set_postfix(loops=loops, refresh=False)
             bar.update(1)
     bar.close()

@@ -31,6 +31,7 @@ import numpy as np
 from helpers.config.tables import Config
 from helpers.errors import SlamError
 from helpers.geometry import check_points, check_pose
+from helpers.slam.deskew import deskew, normalised, per_period
 from helpers.slam.edges_back import BackgroundEdges, EdgesBack
 from helpers.slam.graph.build import build_pose_graph
 from helpers.slam.graph.factors import Edge, gnss_factors
@@ -154,13 +155,17 @@ class Slam:
             return len(self.indices) < len(self.given.indices) and index == self.given.indices[len(self.indices)]
         return index % self.config.registration.skip_frames == 0
 
-    def process(self, scan: np.ndarray | None, index: int, prepared: Future | None = None) -> Step:
+    def process(self, scan: np.ndarray | None, index: int, prepared: Future | None = None, times=None) -> Step:
         """Take scan ``index`` of the flight (sensor frame, (N, 3)), in order.
 
         ``prepared``: the future of :func:`~helpers.slam.preprocess.prepare_scan` on this scan with
         this configuration, computed in another thread meanwhile (as
         :func:`helpers.slam.pipeline.run_slam` does for the next scan); ``scan`` is
-        then not read, and may be None. Only without a given odometry."""
+        then not read, and may be None. Only without a given odometry. ``times``: the scan's per-point times
+        (N,): it is deskewed with the odometry's last motion first (:mod:`helpers.slam.deskew`)."""
+        if times is not None and scan is not None and self.given is None and len(self.odometry.relative):
+            step = per_period(self.odometry.relative[-1], self.config.registration.skip_frames)
+            scan = deskew(scan, normalised(times), step)
         with one_blas_thread():  # OpenBLAS's idle threads would spin on the core FPFH and ICP use (helpers.threads)
             return self._process(scan, index, prepared)
 
