@@ -17,7 +17,7 @@ import time
 from helpers.cli import flight
 from helpers.cli.memory import stage as _stage
 from helpers.cli.own_scans import add_scan_arguments, run_on_scans, wants_scans
-from helpers.cli.terminal import Parser, StreamError, example, reason_lines, say, verdict
+from helpers.cli.terminal import Parser, StreamError, example, report_run, say
 from helpers.errors import SlamError
 
 
@@ -247,14 +247,5 @@ def _run(args) -> int:
         m = run_metrics(data, result, map_errors(result.map_points, data.map_points), health)
     with _stage("writing the run"):
         out = write_run(result, args.out, m, data.poses[result.indices], frame=data.frame)
-    for problem in health.problems:  # first: a report that cannot be printed must not take the warnings with it
-        print(*reason_lines(problem), sep="\n", file=sys.stderr)
-    say(
-        f"{m['n_accepted']} accepted scans of {m['n_scans']}, {m['n_loop_closures']} loop closures "
-        f"({m['n_false_loop_closures']} false); ATE {m['ate_rmse_odometry_m']:.2f} m (odometry) -> "
-        f"{m['ate_rmse_optimized_m']:.2f} m (optimised); {m['runtime_s']['total']:.0f} s; written to {out}",
-        health.summary(),
-        verdict(health.problems),
-        written=out,
-    )
+    report_run(m, health, out)
     return 0

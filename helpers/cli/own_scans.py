@@ -85,7 +85,7 @@ def run_on_scans(args) -> int:
 
     from helpers.cli.memory import stage as _stage
     from helpers.cli.outputs import write_run
-    from helpers.cli.terminal import reason_lines, say, verdict
+    from helpers.cli.terminal import report_run
     from helpers.quality.trust import assess
     from helpers.slam.pipeline import run_slam
 
@@ -104,21 +104,7 @@ def run_on_scans(args) -> int:
     files = dataclasses.replace(result, indices=np.asarray(folder.kept)[result.indices])  # stamps: file numbers
     with _stage("writing the run"):
         out = write_run(files, args.out, metrics, poses_gt)
-    for problem in health.problems:  # first: a report that cannot be printed must not take the warnings with it
-        print(*reason_lines(problem), sep="\n", file=sys.stderr)
-    graded = (
-        f" ({metrics['n_false_loop_closures']} false); ATE {metrics['ate_rmse_odometry_m']:.2f} m (odometry) -> "
-        f"{metrics['ate_rmse_optimized_m']:.2f} m (optimised)"
-        if data.truth
-        else "; no truth given (--truth), no ATE"
-    )
-    say(
-        f"{metrics['n_accepted']} accepted scans of {metrics['n_scans']}, {metrics['n_loop_closures']} loop "
-        f"closures{graded}; {metrics['runtime_s']['total']:.0f} s; written to {out}",
-        health.summary(),
-        verdict(health.problems),
-        written=out,
-    )
+    report_run(metrics, health, out)
     return 0
 
 

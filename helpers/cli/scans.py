@@ -236,9 +236,7 @@ def _read_ply(path: Path):
             raise SlamError("it holds no vertices (the first element must be 'vertex')")
         names = [name for name, _ in props]
         if fmt == "ascii":
-            table = np.loadtxt(f, max_rows=count, ndmin=2)
-            if table.shape != (count, len(props)):
-                raise SlamError(f"it announces {count} vertices of {len(props)} values, read {table.shape}")
+            table = _ascii_table(f, count, len(props), "vertices")
             records = {name: table[:, k] for k, name in enumerate(names)}
         elif fmt in ("binary_little_endian", "binary_big_endian"):
             order = "<" if fmt == "binary_little_endian" else ">"
@@ -249,6 +247,14 @@ def _read_ply(path: Path):
         else:
             raise SlamError(f"PLY format {fmt!r} is not ascii or binary")
     return _columns(records, names)
+
+
+def _ascii_table(f, count: int, width: int, what: str) -> np.ndarray:
+    """The ``count`` x ``width`` numbers of an ASCII body (PLY's vertices, PCD's points), as announced."""
+    table = np.loadtxt(f, max_rows=count, ndmin=2)
+    if table.shape != (count, width):
+        raise SlamError(f"it announces {count} {what} of {width} values, read {table.shape}")
+    return table
 
 
 def _read_pcd(path: Path):
@@ -263,9 +269,7 @@ def _read_pcd(path: Path):
         kind = head["DATA"][0].lower()
         if kind == "ascii":
             width = sum(int(c) for c in counts)
-            table = np.loadtxt(f, max_rows=count, ndmin=2)
-            if table.shape != (count, width):
-                raise SlamError(f"it announces {count} points of {width} values, read {table.shape}")
+            table = _ascii_table(f, count, width, "points")
             starts = np.cumsum([0] + [int(c) for c in counts])
             records = {name: table[:, starts[k]] for k, name in enumerate(names)}
         elif kind == "binary":

@@ -68,3 +68,24 @@ def say(*lines: str, written=None) -> None:
         if written is None:
             raise SlamError(f"cannot write to standard output: {exc.strerror or exc}") from None
         raise StreamError(f"{exc.strerror or exc}; {written} was written in full") from None
+
+
+def report_run(metrics: dict, health, out) -> None:
+    """A finished run's report: each reason of the trust flag on standard error first (a report that cannot
+    be printed must not take the warnings with it), then its figures, the flag's counts and the verdict.
+    The ATE is reported where ``metrics`` has one (a run graded against a truth)."""
+    for problem in health.problems:
+        print(*reason_lines(problem), sep="\n", file=sys.stderr)
+    graded = (
+        f" ({metrics['n_false_loop_closures']} false); ATE {metrics['ate_rmse_odometry_m']:.2f} m (odometry) -> "
+        f"{metrics['ate_rmse_optimized_m']:.2f} m (optimised)"
+        if "ate_rmse_optimized_m" in metrics
+        else "; no truth given (--truth), no ATE"
+    )
+    say(
+        f"{metrics['n_accepted']} accepted scans of {metrics['n_scans']}, {metrics['n_loop_closures']} loop "
+        f"closures{graded}; {metrics['runtime_s']['total']:.0f} s; written to {out}",
+        health.summary(),
+        verdict(health.problems),
+        written=out,
+    )

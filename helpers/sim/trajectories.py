@@ -36,12 +36,7 @@ def write_tum(path: str | Path, poses: np.ndarray, stamps=None) -> None:
 
 def read_tum(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """-> (stamps (N,), poses (N, 4, 4))."""
-    try:
-        rows = np.loadtxt(path, ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise SlamError(f"cannot read TUM trajectory {path}: {exc}") from None
-    if rows.shape[1] != 8:
-        raise SlamError(f"{path}: a TUM line has 8 numbers, found {rows.shape[1]}")
+    rows = _rows(path, 8, "TUM trajectory", "a TUM line")
     return rows[:, 0], from_tum(rows[:, 1:])
 
 
@@ -56,15 +51,21 @@ def write_kitti(path: str | Path, poses: np.ndarray) -> None:
 
 def read_kitti(path: str | Path) -> np.ndarray:
     """KITTI poses (12 numbers a line) -> (N, 4, 4)."""
-    try:
-        rows = np.loadtxt(path, ndmin=2)
-    except (OSError, ValueError) as exc:
-        raise SlamError(f"cannot read KITTI poses {path}: {exc}") from None
-    if rows.shape[1] != 12:
-        raise SlamError(f"{path}: a KITTI pose line has 12 numbers, found {rows.shape[1]}")
+    rows = _rows(path, 12, "KITTI poses", "a KITTI pose line")
     poses = np.tile(np.eye(4), (len(rows), 1, 1))
     poses[:, :3, :] = rows.reshape(-1, 3, 4)
     return poses
+
+
+def _rows(path: str | Path, width: int, what: str, line: str) -> np.ndarray:
+    """The numbers of a text file of poses, ``width`` a line; a :class:`SlamError` naming ``what`` otherwise."""
+    try:
+        rows = np.loadtxt(path, ndmin=2)
+    except (OSError, ValueError) as exc:
+        raise SlamError(f"cannot read {what} {path}: {exc}") from None
+    if rows.shape[1] != width:
+        raise SlamError(f"{path}: {line} has {width} numbers, found {rows.shape[1]}")
+    return rows
 
 
 CSV_HEADER = "index,x,y,z,roll,pitch,yaw"
