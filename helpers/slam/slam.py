@@ -163,11 +163,18 @@ class Slam:
         :func:`helpers.slam.pipeline.run_slam` does for the next scan); ``scan`` is
         then not read, and may be None. Only without a given odometry. ``times``: the scan's per-point times
         (N,): it is deskewed with the odometry's last motion first (:mod:`helpers.slam.deskew`)."""
-        if times is not None and scan is not None and self.given is None and len(self.odometry.relative):
-            step = per_period(self.odometry.relative[-1], self.config.registration.skip_frames)
-            scan = deskew(scan, normalised(times), step)
+        if times is not None and scan is not None and self.accepts(index):
+            scan = self._deskewed(scan, times)
         with one_blas_thread():  # OpenBLAS's idle threads would spin on the core FPFH and ICP use (helpers.threads)
             return self._process(scan, index, prepared)
+
+    def _deskewed(self, scan: np.ndarray, times) -> np.ndarray:
+        """``scan`` deskewed with the odometry's last step, one scan period of it; as it is until the odometry
+        has measured a step (and with a given odometry, which registers nothing)."""
+        if self.given is not None or not self.odometry.relative:
+            return scan
+        step = per_period(self.odometry.relative[-1], self.config.registration.skip_frames)
+        return deskew(scan, normalised(times), step)
 
     def _process(self, scan: np.ndarray | None, index: int, prepared: Future | None) -> Step:
         if self.indices and index <= self.indices[-1]:
