@@ -13,6 +13,7 @@ import io
 import json
 import re
 import time
+import zipfile
 from contextlib import redirect_stderr
 from html.parser import HTMLParser
 from pathlib import Path
@@ -24,8 +25,8 @@ import pytest
 from PIL import Image
 
 from helpers.__main__ import main
+from helpers.site import archive, build_site, notebook_paths, solution_paths
 from helpers.site import build as site_module
-from helpers.site import build_site, notebook_paths, solution_paths
 from helpers.site import sphinx_ext as site_ext
 from helpers.site.landing import summary as page_summary
 
@@ -241,7 +242,8 @@ def test_the_landing_page_shows_the_result_and_every_page_in_order(book):
     for page in pages:
         assert page.is_file(), f"{page.name} is missing"
     landing = _parse(book)
-    listed = [str(_local(book, href)) for href in landing.main if _local(book, href) not in (None, book.resolve())]
+    pages_linked = [href for href in landing.main if urlsplit(href).path.endswith(".html")]
+    listed = [str(_local(book, href)) for href in pages_linked if _local(book, href) not in (None, book.resolve())]
     assert listed == [str(p.resolve()) for p in pages[1:]], "the landing page lists the pages out of order"
     pictures = [attrs["src"] for attrs in landing.images if "result" in attrs.get("src", "")]
     assert pictures, "the landing page has no result picture"
@@ -252,7 +254,8 @@ def test_the_landing_page_shows_the_result_and_every_page_in_order(book):
     headings = [heading for level, heading in _headings(book) if level == 2]
     assert headings[:3] == ["What you will learn", "Before you start", "Running the notebooks yourself"], headings
     words = " ".join(re.sub(r"<[^>]+>", " ", text).split())  # code spans break a command into tags
-    for needed in ("numpy", "linear algebra", "roughly an hour", "make setup", "pip install", "jupyter lab", "helpers"):
+    for needed in ("numpy", "linear algebra", "roughly an hour", "make run", "make test", "make lab", "pip install",
+                   "jupyter lab", "helpers", "simultaneous localisation and mapping"):  # fmt: skip
         assert needed in words, f"the landing page does not mention {needed!r}"
 
 
@@ -277,6 +280,77 @@ def test_every_link_between_pages_resolves(book):
                 continue  # a reference the reader may follow; never loaded by the page itself
             target = _local(page, href)
             assert target is None or target.is_file(), f"{page.name} links {href}, which the book lacks"
+
+
+def test_every_link_to_a_place_in_a_page_finds_its_anchor(book):
+    """A link to section 3.4 lands on it, not at the top of a 32,000 px page: every "#anchor" exists."""
+    ids = {}
+    checked = 0
+    for page in [*_pages(book), book.parent / "search.html"]:
+        for href in _parse(page).links:
+            parts = urlsplit(href)
+            if OFF_MACHINE.match(href) or not parts.fragment or href.startswith(("mailto:", "javascript:")):
+                continue
+            target = _local(page, href) or page.resolve()
+            if target not in ids:
+                ids[target] = set(re.findall(r'\bid="([^"]+)"', target.read_text(encoding="utf-8")))
+            assert unquote(parts.fragment) in ids[target], f"{page.name} links {href}: no such anchor"
+            checked += 1
+    assert checked > 100, f"only {checked} links to anchors"
+
+
+MENTION = re.compile(r"\b[Ss]ections? \d+\.\d+")
+
+
+def test_section_mentions_are_links_and_cross_page_links_carry_anchors(book):
+    """The text's "section 3.4" links to the section, on its page or another; none is left as plain text."""
+    linked, plain = 0, []
+    for page in _pages(book)[1:]:
+        html = page.read_text(encoding="utf-8")
+        article = html[html.index("<article") : html.index("</article>")]
+        article = re.sub(r"<(pre|code|script|h[1-6])\b.*?</\1>", "", article, flags=re.DOTALL)  # no links there
+        mentions = re.findall(r'<a class="section-mention[^"]*" href="([^"]+)">', article)
+        linked += len(mentions)
+        assert all("#" in href for href in mentions), f"{page.name}: a mention without an anchor"
+        text = re.sub(r"<a [^>]*>.*?</a>", "", article, flags=re.DOTALL)
+        plain += [f"{page.name}: {m}" for m in MENTION.findall(re.sub(r"<[^>]+>", "", text))]
+    assert linked > 50, f"only {linked} section mentions are links"
+    assert not plain, f"mentions left as text: {plain[:5]}"
+    across = [href for page in _pages(book)[1:] for href in _parse(page).main
+              if re.match(r"(\.\./)?0\d_\w+\.html#", href)]  # fmt: skip
+    assert len(across) > 20, f"only {len(across)} links between pages carry an anchor"
+
+
+def test_no_two_headings_of_the_book_share_a_section_number(book):
+    """Chapter 3 once showed two sections "3.4.1"."""
+    seen = {}
+    for page in _pages(book)[1:9]:
+        for _, heading in _headings(page):
+            number = re.match(r"(\d+(?:\.\d+)+)\s", heading)
+            if number:
+                assert number.group(1) not in seen, f"{number.group(1)} on {page.name} and {seen[number.group(1)]}"
+                seen[number.group(1)] = page.name
+    assert len(seen) > 50, f"only {len(seen)} numbered headings"
+
+
+def test_the_landing_page_offers_the_project_and_repeats_no_title(book):
+    """The zip holds the notebooks, the package and what the README's commands need; nothing built or
+    installed. Each page's line says what its title does not."""
+    zipped = book.parent / archive.ARCHIVE
+    assert archive.ARCHIVE in _parse(book).main, "the landing page does not link the project"
+    with zipfile.ZipFile(zipped) as opened:
+        names = [name.removeprefix(f"{archive.NAME}/") for name in opened.namelist()]
+    for needed in ("README.md", "Makefile", "environment.txt", "pyproject.toml", "LICENSE", "helpers/__init__.py",
+                   "notebooks/figures/result.png", "data/aerialMap.tar.gz"):  # fmt: skip
+        assert needed in names, f"the project's archive lacks {needed}"
+    notebooks = [p.relative_to(site_module.NOTEBOOKS.parent).as_posix() for p in [*notebook_paths(), *solution_paths()]]
+    assert set(notebooks) <= set(names), "the archive lacks a notebook or a worked answer"
+    assert not [n for n in names if n.split("/")[0] in ("build", ".venv") or "__pycache__" in n], "built files"
+    text = book.read_text(encoding="utf-8")
+    for line in re.findall(r'<li><p><a class="reference internal" href="0\d[^"]*">(.*?)</a>(.*?)</p></li>', text):
+        title, said = (" ".join(re.sub(r"<[^>]+>", "", part).split()) for part in line)
+        subtitle = title.split(":", 1)[-1].strip()
+        assert subtitle.lower() not in said.lower(), f"the line of {title!r} repeats it: {said!r}"
 
 
 def test_every_picture_is_a_local_file_that_shows_something(book):
@@ -565,6 +639,96 @@ def test_a_code_line_of_88_characters_fits_its_box_on_a_laptop_screen(book, brow
             boxes = browser.evaluate(CODE_BOXES)
             cut = [longest for scrolls, longest in boxes if scrolls and longest <= 88]
             assert not cut, f"{page.name}: {len(cut)} code boxes scroll with lines of at most {max(cut)} characters"
+    finally:
+        browser.resize(1300, 900)
+
+
+# MathJax 2 inside the theme's boxes for MathJax 3: where each inline formula's baseline sits against the line's
+# (a zero-size box before the formula sits on the line's baseline, one inside MathJax's own box on the
+# formula's), and each display formula's natural width against the box it is shown in, and whether that scrolls.
+MATHS = """(() => {
+  const mark = () => {
+    const m = document.createElement('span');
+    m.style.cssText = 'display:inline-block;width:0;height:0';
+    return m;
+  };
+  const offsets = [...document.querySelectorAll('article p > span.math')].map(s => {
+    const inner = s.querySelector('.MathJax span.math'); if (!inner) return null;
+    const a = mark(), b = mark(); s.before(a); inner.append(b);
+    const [ra, rb, f] = [a.getBoundingClientRect(), b.getBoundingClientRect(), inner.getBoundingClientRect()];
+    a.remove();
+    b.remove();
+    return f.left >= ra.left - 1 ? ra.bottom - rb.bottom : null;  // null: the line broke before the formula
+  }).filter(o => o !== null);
+  const displays = [...document.querySelectorAll('article div.math .MathJax_Display')].map(box => {
+    const formula = box.querySelector('span.MathJax > nobr > span.math');
+    const natural = formula.firstElementChild.getBoundingClientRect().width;
+    return {natural, shown: formula.getBoundingClientRect().width, box: box.clientWidth,
+            scrolls: box.scrollWidth >= natural - 1 && getComputedStyle(box).overflowX === 'auto'};
+  });
+  return {offsets, displays};
+})()"""
+
+
+def test_inline_formulas_sit_on_the_line_and_wide_ones_scroll_on_a_phone(book, browser):
+    """The theme's span.math flex box raised inline formulas about 4 px and cut display formulas wider than a
+    400 px phone, with no scroll bar: the book's style sets them right for the MathJax 2 it loads."""
+    try:
+        for width in (1366, 400):
+            browser.resize(width, 900)
+            wide = 0
+            for name in ("03_registration.html", "06_pose_graph.html", "08_your_own_ground.html"):
+                browser.open((book.parent / name).resolve().as_uri())
+                browser.evaluate(MATHJAX_DONE)
+                assert browser.evaluate("MathJax.version").startswith("2.7")
+                state = browser.evaluate(MATHS)
+                assert len(state["offsets"]) > 10 and max(map(abs, state["offsets"])) < 0.6, f"{name}: {state}"
+                for formula in state["displays"]:
+                    assert formula["shown"] >= formula["natural"] - 1, f"{name} at {width} px: a formula cut {formula}"
+                    if formula["natural"] > formula["box"] + 1:
+                        wide += 1
+                        assert formula["scrolls"], f"{name} at {width} px: a wide formula does not scroll {formula}"
+            assert wide or width > 1000, "no formula wider than a phone: this test checks nothing"
+    finally:
+        browser.resize(1300, 900)
+
+
+def test_the_texts_code_blocks_have_a_copy_button_too(book, browser):
+    """The landing page's two commands, chapter 1's call for your own data."""
+    browser.resize(1366, 900)
+    for page in (book, book.parent / "01_dataset.html"):
+        browser.open(page.resolve().as_uri())
+        blocks = browser.evaluate("""[...document.querySelectorAll('article div.highlight')]
+          .filter(d => !d.closest('.cell_input, .cell_output'))
+          .map(d => [!!d.querySelector('button.copybtn'), getComputedStyle(d.querySelector('pre')).overflowX])""")
+        assert blocks and all(button and scroll == "auto" for button, scroll in blocks), f"{page.name}: {blocks}"
+
+
+def test_the_books_column_on_a_laptop_shows_a_figure_whole(book, browser):
+    """The figures are drawn style.FIGURE_WIDTH wide at style.DPI for a column of style.BOOK_COLUMN_PX: on a
+    1366 px screen the column is at least that wide, so their text is shown at its size, 11 px or more."""
+    from helpers.viz import style
+
+    browser.resize(1366, 900)
+    browser.open((book.parent / "06_pose_graph.html").resolve().as_uri())
+    column = browser.evaluate("document.querySelector('article section > p').getBoundingClientRect().width")
+    assert column >= style.BOOK_COLUMN_PX, f"the column is {column:.0f} px: figures would be shrunk"
+    assert style.FIGURE_WIDTH * style.DPI <= column
+
+
+def test_a_printed_sentence_wraps_on_a_laptop_and_a_printed_table_scrolls_on_a_phone(book, browser):
+    """The worked answers' "correct: ..." lines were cut at 1366 px; on a phone printed lines keep their columns."""
+    page = (book.parent / "solutions" / "03_registration_solutions.html").resolve().as_uri()
+    cut = """[...document.querySelectorAll('div.cell_output div.output.stream pre')].filter(p => p.checkVisibility())
+      .map(p => [p.scrollWidth > p.clientWidth + 1, getComputedStyle(p).whiteSpace])"""
+    try:
+        browser.resize(1366, 900)
+        browser.open(page)
+        outputs = browser.evaluate(cut)
+        assert outputs and not any(scrolls for scrolls, _ in outputs), f"printed lines cut at 1366 px: {outputs}"
+        browser.resize(400, 800)
+        browser.open(page)
+        assert {space for _, space in browser.evaluate(cut)} == {"pre"}, "printed lines wrap on a phone"
     finally:
         browser.resize(1300, 900)
 

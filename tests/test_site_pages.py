@@ -135,7 +135,7 @@ def test_relative_links_between_notebooks_become_links_between_pages(small_book)
     chapter, answers = small_book / "03_figures.html", small_book / "solutions" / "03_figures_solutions.html"
     links = _parse(chapter).main
     assert "01_first.html" in links and "solutions/03_figures_solutions.html" in links, links
-    assert "../03_figures.html" in _parse(answers).main
+    assert "../03_figures.html#exercises" in _parse(answers).main  # back to the chapter's exercises
     for page in (chapter, answers):
         for href in _parse(page).main:
             target = _local(page, href)

@@ -1,15 +1,18 @@
 """The tutorial as a book: the notebooks (executed, or as committed) built by
 Sphinx with myst-nb and sphinx-book-theme, the tooling Jupyter Book is made
-of. A landing page shows the result and says what each page teaches; every
-page has the whole book in its sidebar, previous/next links and a search box.
-MathJax 2.7 (from ``jupyter-server-mathjax``) is copied beside the pages and
-the theme's fonts and icons and the code cells' copy button
-(sphinx-copybutton) are its own files, so the book opens from disk with no
-server and no network. Cell tags (``hide-input``, ``hide-cell``,
-``remove-cell``) and admonitions (```` ```{note} ```` or ``:::{tip}``) work;
-a cell JupyterLab shows folded is folded in the book too (``cells``). A
-cell's ``mystnb: {figure: {caption, name}, image: {alt}}`` metadata makes its
-picture a numbered figure with a caption and alt text (``sphinx_ext``); the
+of. A landing page shows the result, says what each page teaches and offers
+the project itself as a zip (``archive``), with the two commands that run it;
+every page has the whole book in its sidebar, previous/next links and a
+search box. MathJax 2.7 (from ``jupyter-server-mathjax``) is copied beside
+the pages, and the theme's fonts and icons and the copy button of the code
+cells and of the text's code blocks (sphinx-copybutton) are its own files, so
+the book opens from disk with no server and no network. Cell tags
+(``hide-input``, ``hide-cell``, ``remove-cell``) and admonitions
+(```` ```{note} ```` or ``:::{tip}``) work; a cell JupyterLab shows folded is
+folded in the book too (``cells``). A cell's ``mystnb: {figure: {caption,
+name}, image: {alt}}`` metadata makes its picture a numbered figure with a
+caption and alt text, the notebooks' own section numbers are checked and
+"section 3.4" in the text links to it (``sphinx_ext``, ``sections``); the
 landing page is written by ``landing``, the style by ``book.css``.
 
 The Sphinx source tree (a generated ``conf.py`` and ``index.md``, copies of
@@ -30,7 +33,7 @@ from unittest import mock
 
 from helpers import outdir
 from helpers.errors import SlamError
-from helpers.site import cells
+from helpers.site import archive, cells
 from helpers.site.landing import RESULT_PICTURE, SOLUTIONS, TITLE, index_page
 from helpers.viz.display import KERNEL_ENVIRONMENT
 
@@ -46,7 +49,8 @@ MARKER = ".helpers-site"  # lists what a build wrote: the next one may replace t
 FATAL_WARNINGS = re.compile(
     r"toctree contains reference to nonexisting document|image file not readable|undefined label|"
     r"unknown document|Could not find|not found|does not exist|\[myst\.xref_missing\]|\[myst\.iref_ambiguous\]|"
-    r"Duplicate explicit target name"  # two figures given one name: a link to it would reach either
+    r"Duplicate explicit target name|"  # two figures given one name: a link to it would reach either
+    r"section number|is cited, but no heading has that number"  # helpers.site.sections: numbers, mentions
 )
 
 ANSI_COLOUR = re.compile(r"\x1b\[[0-9;]*m")
@@ -69,7 +73,9 @@ CONF = {
     "myst_update_mathjax": False,  # it writes a MathJax 3/4 configuration; ours is MathJax 2 (below)
     "nb_execution_mode": "off",  # build_site executes the notebooks itself, in the kernel environment
     "nb_merge_streams": True,
-    "copybutton_selector": "div.cell_input div.highlight pre",  # on the code cells, not on what they print
+    # A copy button on the code cells and on the code blocks of the text (a command, a call to adapt), not on
+    # what the cells print (an output's box is a div.output.highlight-*).
+    "copybutton_selector": "div[class*=highlight-]:not(.output) > div.highlight > pre",
     "nb_ipywidgets_js": {},  # no widget in our outputs; its default loads require.js from a CDN
     "mathjax_path": MATHJAX_URL,  # under _static
     "mathjax2_config": {
@@ -94,6 +100,10 @@ CONF = {
     "html_static_path": ["_static"],  # the book's style sheet, STYLE_SHEET
     "html_css_files": [STYLE_SHEET.name],
     "html_show_sphinx": False,
+    # Sphinx's search shows an excerpt of each page it finds by fetching the page, which a browser refuses
+    # for a page opened from disk (file://): the results would be bare titles and the console full of errors.
+    # The page titles alone, then, from disk and served over http (python -m http.server -d build/html) alike.
+    "html_show_search_summary": False,
     "html_theme_options": {
         "home_page_in_toc": True,
         "show_navbar_depth": 1,
@@ -138,7 +148,11 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         if (NOTEBOOKS / FIGURES).is_dir():  # pictures the notebooks' text may show, and the landing page's
             shutil.copytree(NOTEBOOKS / FIGURES, source / FIGURES, ignore=shutil.ignore_patterns("*.py", "__pycache__"))
         picture = (source / RESULT_PICTURE).is_file()
-        (source / "index.md").write_text(index_page(source, chapters, solutions, picture), encoding="utf-8")
+        # The project to download (the notebooks as in the checkout, the package, the Makefile, ...): the
+        # landing page links it and says its size.
+        project = archive.write_archive(NOTEBOOKS.parent, tmp / archive.ARCHIVE, skip=(work, Path(out_dir)))
+        landing = index_page(source, chapters, solutions, picture, archive.ARCHIVE, project.stat().st_size)
+        (source / "index.md").write_text(landing, encoding="utf-8")
         (source / "conf.py").write_text(_conf(), encoding="utf-8")
         (source / "_static").mkdir()
         shutil.copyfile(STYLE_SHEET, source / "_static" / STYLE_SHEET.name)
@@ -146,6 +160,7 @@ def build_site(out_dir: str | Path = "build/html", execute: bool = True) -> Path
         built = _sphinx(source, tmp / "build" / "html", tmp / "build" / "doctrees")
         shutil.copytree(built, work, dirs_exist_ok=True)
         _copy_mathjax(work / "_static" / MATHJAX_DIR)
+        shutil.move(project, work / archive.ARCHIVE)
     return Path(out_dir) / "index.html"
 
 

@@ -9,10 +9,14 @@
   ``mystnb: {image: {alt: ...}}`` metadata; a picture without one would get
   its file name, a hash, as alt text, so it gets the page's title and its
   figure number (or its place on the page) instead. The same holds for a
-  picture inside an output's raw HTML, such as the scan player's frame.
+  picture inside an output's raw HTML, such as the scan player's frame; a
+  cell's ``mystnb.figure`` metadata makes an animation a numbered figure with
+  its caption as it does a picture.
 - A picture a cell shows links to its own file, so a phone's reader can open
   it alone and zoom (Sphinx links a picture shown smaller than drawn, as
   ``show_figure``'s are; the others are marked so it links them too).
+- The notebooks' own section numbers are checked, and "section 3.4" in the
+  text links to its heading (``sections``).
 """
 
 from __future__ import annotations
@@ -22,6 +26,8 @@ import re
 from pathlib import PurePosixPath
 
 from docutils import nodes
+
+from helpers.site import sections
 
 CHAPTER = re.compile(r"(\d+)_")  # notebooks/03_registration.ipynb is chapter 3
 SOLUTIONS = "solutions"
@@ -33,6 +39,11 @@ def setup(app):
     app.connect("env-get-updated", number_figures_by_chapter, priority=900)  # after Sphinx numbered them (500)
     app.connect("doctree-resolved", give_every_picture_alt_text)
     app.connect("doctree-resolved", link_output_pictures_to_their_files)
+    app.connect("doctree-read", sections.collect_headings)
+    app.connect("env-purge-doc", sections.purge_headings)
+    app.connect("env-merge-info", sections.merge_headings)
+    app.connect("env-updated", sections.check_numbers)
+    app.connect("doctree-resolved", sections.link_mentions)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
 
 
@@ -60,8 +71,9 @@ def number_figures_by_chapter(app, env) -> list[str]:
     return []
 
 
-def figure_number(env, docname: str, image: nodes.image) -> str | None:
-    """The number of the captioned figure holding ``image``, as the page shows it ("3.2"), or None."""
+def figure_number(env, docname: str, image: nodes.Element) -> str | None:
+    """The number of the captioned figure holding ``image`` (or an output's raw HTML), as the page shows it
+    ("3.2"), or None."""
     figure = image.parent
     while figure is not None and not isinstance(figure, nodes.figure):
         figure = figure.parent
@@ -84,7 +96,8 @@ def give_every_picture_alt_text(app, doctree, docname: str) -> None:
         text = raw.astext()
         if IMG_WITHOUT_ALT.search(text):
             what = "an animation" if ANIMATION in text else "a picture in an output"
-            alt = html.escape(f"{title}, {what}", quote=True)
+            number = figure_number(app.env, docname, raw)  # a cell's mystnb.figure makes it a figure too
+            alt = html.escape(f"{title}, figure {number}, {what}" if number else f"{title}, {what}", quote=True)
             raw.clear()
             raw += nodes.Text(IMG_WITHOUT_ALT.sub(f'<img alt="{alt}"', text))
 

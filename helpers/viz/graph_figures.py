@@ -6,7 +6,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.collections import LineCollection
 
-from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, inset_zoom, scale_bar, segments, xy_of
+from helpers.viz.style import COLORS, FIGURE_WIDTH, TEXT_PT, grid, inset_zoom, scale_bar, segments, xy_of
 
 
 def zoom_with_scale(ax, draw, window, at) -> None:
@@ -46,7 +46,9 @@ def chain_figure(truth, odometry, optimized, closed_form=None):
     each node's error before and after, and the correction the loop brought."""
     truth, odometry, optimized = (np.asarray(v, float) for v in (truth, odometry, optimized))
     nodes = np.arange(len(truth))
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 5.4), constrained_layout=True, height_ratios=(1, 1.4))
+    fig, (top, bottom) = plt.subplots(
+        2, 1, figsize=(FIGURE_WIDTH, 5.4), constrained_layout=True, height_ratios=(1, 1.4)
+    )
     for row, (name, x, color) in enumerate(
         (
             ("truth", truth, COLORS["ground_truth"]),
@@ -73,7 +75,7 @@ def chain_figure(truth, odometry, optimized, closed_form=None):
     bottom.axhline(0, color="black", lw=0.8)
     bottom.set(xlabel="node", ylabel="metres", xticks=nodes)
     grid(bottom)
-    bottom.legend(fontsize=9, loc="lower left")
+    bottom.legend(fontsize=TEXT_PT, loc="lower left")
     return fig
 
 
@@ -83,7 +85,7 @@ def iterations_figure(errors, lambdas=None, title="Levenberg-Marquardt, step by 
     the optimiser used, if given."""
     errors = np.asarray(errors, float)
     steps = np.arange(len(errors))
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 3.4), constrained_layout=True)
     left.plot(steps, errors, "-o", color=COLORS["optimized"])
     left.set(xlabel="iteration (0 = the initial guess)", ylabel="graph error", xticks=steps, ylim=(0, None))
     left.set_title(title)
@@ -94,7 +96,7 @@ def iterations_figure(errors, lambdas=None, title="Levenberg-Marquardt, step by 
     if lambdas is not None:
         right.semilogy(steps, np.asarray(lambdas, float), "s--", color="#6a3d9a", ms=4, label="damping lambda")
     right.set(xlabel="iteration", xticks=steps, title="how fast it settles (log scale)")
-    right.legend(fontsize=9)
+    right.legend(fontsize=TEXT_PT)
     for ax in (left, right):
         grid(ax)
     return fig
@@ -107,7 +109,7 @@ def pose_graph_figure(poses, loop_pairs, every: int = 1, zoom=(24.0, 18.0), inse
     drawn at ``inset_at`` (x0, y0, width, height in axes fractions); None: no zoom."""
     xy = xy_of(poses)
     pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
-    fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.8), constrained_layout=True)
 
     def draw(axis, size):
         axis.plot(xy[:, 0], xy[:, 1], color=COLORS["odometry"], lw=1.2, zorder=2)
@@ -122,7 +124,7 @@ def pose_graph_figure(poses, loop_pairs, every: int = 1, zoom=(24.0, 18.0), inse
     ax.plot([], [], color=COLORS["loop"], lw=2.2, label=f"loop edges ({len(pairs)})")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="the pose graph on the odometry poses")
     grid(ax)
-    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=9)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=TEXT_PT)
     if zoom is not None and len(pairs):
         window = around_longest_loop(poses, poses, pairs, zoom)
         zoom_with_scale(ax, lambda axis: draw(axis, 14), window, inset_at)
@@ -144,7 +146,7 @@ def kernels_figure(scales: dict, limit: float = 10.0):
     if "cauchy" in scales:
         c = scales["cauchy"]
         costs[f"Cauchy, c = {c:g}"] = (c**2 / 2 * np.log1p((r / c) ** 2), 1 / (1 + (r / c) ** 2))
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 3.4), constrained_layout=True)
+    fig, (left, right) = plt.subplots(1, 2, figsize=(FIGURE_WIDTH, 3.4), constrained_layout=True)
     for (name, (rho, weight)), color in zip(costs.items(), ("black", "#6a3d9a", COLORS["loop"]), strict=False):
         left.plot(r, rho, color=color, lw=2, label=name)
         right.plot(r, weight, color=color, lw=2, label=name)
@@ -152,7 +154,7 @@ def kernels_figure(scales: dict, limit: float = 10.0):
     right.set(xlabel="whitened residual r (sigmas)", ylabel="weight w(r)", ylim=(0, 1.05), title="weight")
     for ax in (left, right):
         grid(ax)
-    right.legend(fontsize=9)
+    right.legend(fontsize=TEXT_PT)
     return fig
 
 
@@ -173,7 +175,7 @@ def trajectories_figure(
     room for the arcs above the track); None: no zoom."""
     gt, odo, opt = xy_of(ground_truth), xy_of(odometry), xy_of(optimized)
     pairs = np.asarray(loop_pairs, int).reshape(-1, 2)
-    fig, ax = plt.subplots(figsize=(10, 5.8), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.8), constrained_layout=True)
 
     def draw(axis):
         axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=3, label="ground truth")
@@ -190,7 +192,7 @@ def trajectories_figure(
     ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
-    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=9)
+    ax.legend(loc="center left", bbox_to_anchor=(0.1, 0.5) if zoom is not None else (0.35, 0.5), fontsize=TEXT_PT)
     if zoom is not None and len(pairs):
         window = around_longest_loop(odometry, optimized, pairs, zoom, lift=0.15 * zoom[1])
         zoom_with_scale(ax, draw, window, inset_at)
@@ -201,7 +203,7 @@ def position_errors_figure(x, errors: dict, xlabel="node (accepted scan)", loop_
     """Distance from the true position, node by node, one line per
     trajectory; ``errors`` maps a label (whose colour key is found from
     "odometry"/"optimi") to (N,) errors in metres. Loop nodes are marked."""
-    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.6), constrained_layout=True)
     for name, values in errors.items():
         color = COLORS["odometry"] if "odometry" in name else COLORS["optimized"]
         ax.plot(x, values, color=color, lw=2, label=name)
@@ -209,7 +211,7 @@ def position_errors_figure(x, errors: dict, xlabel="node (accepted scan)", loop_
         ax.axvline(node, color=COLORS["loop"], lw=1, alpha=0.6, label="a loop edge arrives" if k == 0 else None)
     ax.set(xlabel=xlabel, ylabel="position error (m)", ylim=(0, None))
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=TEXT_PT, loc="upper left")
     return fig
 
 
@@ -217,13 +219,13 @@ def loop_weights_figure(labels, whitened, weights):
     """Each loop edge after optimisation: its whitened residual (sigmas) and
     the weight the robust kernel gave it."""
     x = np.arange(len(labels))
-    fig, (top, bottom) = plt.subplots(2, 1, figsize=(10, 4.6), sharex=True, constrained_layout=True)
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(FIGURE_WIDTH, 4.6), sharex=True, constrained_layout=True)
     top.bar(x, whitened, color=COLORS["loop"], width=0.7)
     top.set(ylabel="residual (sigmas)", title="loop edges after optimisation")
     bottom.bar(x, weights, color=COLORS["loop"], width=0.7)
     bottom.axhline(1, color="black", lw=1, ls="--")
     bottom.set(ylabel="kernel weight", ylim=(0, 1.1))
-    bottom.set_xticks(x, labels, rotation=60, fontsize=8)
+    bottom.set_xticks(x, labels, rotation=60, fontsize=TEXT_PT)
     bottom.set_xlabel("loop edge (older node - current node)")
     for ax in (top, bottom):
         grid(ax)
@@ -238,10 +240,10 @@ def left_out_figure(labels, at_optimum, left_out):
     ax.bar(x - 0.2, at_optimum, width=0.4, color=COLORS["optimized"], label="in the optimised graph")
     ax.bar(x + 0.2, left_out, width=0.4, color=COLORS["loop"], label="left out: against the graph without it")
     ax.set_yscale("log")
-    ax.set_xticks(x, labels, rotation=30, fontsize=9)
+    ax.set_xticks(x, labels, rotation=30, fontsize=TEXT_PT)
     ax.set(xlabel="loop edge (older node - current node)", ylabel="residual (sigmas)")
     ax.set_title("where each loop edge ends: in the graph, and left out of it")
-    ax.legend(loc="upper left", fontsize=9)
+    ax.legend(loc="upper left", fontsize=TEXT_PT)
     grid(ax)
     return fig
 
@@ -252,7 +254,7 @@ def bad_edge_figure(ground_truth, results: dict, bad_pair, inset=None):
     gt = xy_of(ground_truth)
     n = len(results)
     fig, axes = plt.subplots(
-        1, n, figsize=(min(FIGURE_WIDTH, 6.2 * n), 4.0), squeeze=False, sharey=True, constrained_layout=True
+        1, n, figsize=(min(FIGURE_WIDTH, 6.2 * n), 2.9), squeeze=False, sharey=True, constrained_layout=True
     )
     for ax, (title, poses) in zip(axes[0], results.items(), strict=True):
         xy = xy_of(poses)
@@ -264,5 +266,7 @@ def bad_edge_figure(ground_truth, results: dict, bad_pair, inset=None):
         ax.set(title=title, xlabel="x (m)", aspect="equal")
         grid(ax)
     axes[0, 0].set_ylabel("y (m)")
-    axes[0, 0].legend(loc="center", fontsize=9)
+    # Under the panels: inside one, it would cover a trajectory the wrong edge folds across the loop.
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=TEXT_PT, frameon=False)
     return fig

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.patches import Ellipse
 
 from helpers.viz.graph_figures import zoom_with_scale
-from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, xy_of
+from helpers.viz.style import COLORS, FIGURE_WIDTH, TEXT_PT, grid, xy_of
 
 # One colour per run or stage of notebook 8's graph: the shared odometry red and optimised blue first, then
 # colours no other notebook gives a meaning (purple is the reference's run, orange the loop edges).
@@ -42,7 +42,7 @@ def runs_figure(
     ax.plot(*gt[0], "o", color="black", ms=8, mfc="none", mew=2, label="start")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=TEXT_PT, loc="upper left")
     if end_zoom is not None:  # centred on the truth's last few metres, so the tracks run into it
         x, y = gt[np.linalg.norm(gt - gt[-1], axis=1) <= min(end_zoom) / 2].mean(axis=0)
         window = (x - end_zoom[0] / 2, x + end_zoom[0] / 2, y - end_zoom[1] / 2, y + end_zoom[1] / 2)
@@ -69,14 +69,14 @@ def ellipses_figure(poses, covariances, magnify: float, ground_truth=None, every
         top.add_patch(Ellipse(xy[k + 1], width, height, angle=angle, fc="none", ec=ELLIPSE_COLOR, lw=1.2))
     top.plot([], [], color=ELLIPSE_COLOR, lw=1.2, label=f"one-sigma ellipse of each step, x {magnify:g}")
     top.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="how sure each step is, seen from above")
-    top.legend(fontsize=9, loc="best")
+    top.legend(fontsize=TEXT_PT, loc="best")
     grid(top)
     nodes = np.arange(1, len(cov) + 1)
     side.plot(nodes, 100 * np.sqrt(values[:, 1]), color=ELLIPSE_COLOR, lw=2, label="loosest direction")
     side.plot(nodes, 100 * np.sqrt(np.maximum(values[:, 0], 0)), color="black", lw=1.5, label="surest direction")
     side.set(xlabel="node the step reaches", ylabel="sigma (cm)", ylim=(0, None))
     side.set_title("each step's sigma in the ground plane")
-    side.legend(fontsize=9)
+    side.legend(fontsize=TEXT_PT)
     grid(side)
     return fig
 
@@ -85,12 +85,12 @@ def stage_errors_figure(ground_truth, stages: dict, xlabel="node (accepted scan)
     """Distance from the true position, node by node, for each stage
     (label -> (K, 4, 4) poses), in the colours of :func:`runs_figure`."""
     truth = np.asarray(ground_truth)[:, :3, 3]
-    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.6), constrained_layout=True)
     for (label, poses), color in zip(stages.items(), STAGE_COLORS, strict=False):
         ax.plot(np.linalg.norm(np.asarray(poses)[:, :3, 3] - truth, axis=1), color=color, lw=2, label=label)
     ax.set(xlabel=xlabel, ylabel="position error (m)", ylim=(0, None))
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=TEXT_PT, loc="upper left")
     return fig
 
 
@@ -99,11 +99,11 @@ def sigma_errors_figure(ground_truth, graphs: dict, colors=None, xlabel="node (a
     (dashed), for each graph (label -> ((K, 4, 4) optimised poses, (K,) sigmas in metres)): where the dashed
     line lies near the solid one, the graph knows how far it is off."""
     truth = np.asarray(ground_truth)[:, :3, 3]
-    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.6), constrained_layout=True)
     for (label, (poses, sigmas)), color in zip(graphs.items(), colors or STAGE_COLORS[2:], strict=False):
         ax.plot(np.linalg.norm(np.asarray(poses)[:, :3, 3] - truth, axis=1), color=color, lw=2, label=f"{label}: error")
         ax.plot(np.asarray(sigmas), color=color, lw=1.5, ls="--", label=f"{label}: the graph's sigma")
     ax.set(xlabel=xlabel, ylabel="metres", ylim=(0, None))
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left", ncols=2)
+    ax.legend(fontsize=TEXT_PT, loc="upper left", ncols=2)
     return fig

@@ -23,8 +23,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from helpers.geometry import transform_points
-from helpers.viz.player import offline_player
-from helpers.viz.style import COLORS, GREY, grid, xy_of
+from helpers.viz.player import FRAME_DPI, embedded_frames, offline_player
+from helpers.viz.style import COLORS, DPI, FIGURE_WIDTH, GREY, TEXT_PT, grid, xy_of
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class LiveView:
     drone, where loop edges a few metres long can be seen."""
 
     def __init__(
-        self, truth, every: int = 10, show: bool = True, sample: int = 400, size=(9.6, 4.2), zoom: float = 45.0
+        self, truth, every: int = 10, show: bool = True, sample: int = 400, size=(FIGURE_WIDTH, 3.9), zoom: float = 45.0
     ) -> None:
         self.truth = xy_of(truth)
         self.every, self.show, self.sample, self.size = max(1, int(every)), show, int(sample), size
@@ -88,35 +88,26 @@ class LiveView:
         self._draw(artists, frame or self.frames[-1])
         return fig
 
-    def animation(self, frames: int = 15, interval_ms: int = 300, dpi: int = 72, quality: int = 50) -> str:
+    def animation(self, frames: int = 15, interval_ms: int = 300, dpi: int = FRAME_DPI, quality: int = 50) -> str:
         """The recorded frames as an HTML animation (play, pause, step) with
         its pictures embedded and nothing fetched from the network. At most
         ``frames`` pictures, spread over the run and always ending on the last
         frame, as JPEG of ``quality`` (lines and text survive a low one, and
-        the page stays light)."""
-        import tempfile
-        from pathlib import Path
-
+        the page stays light) drawn at ``dpi``, shown at the figures' size."""
         from matplotlib import animation
 
         if not self.frames:
             raise ValueError("no frame recorded: call update() with what Slam.process returned first")
         picked = np.unique(np.linspace(0, len(self.frames) - 1, min(frames, len(self.frames))).round().astype(int))
         fig, axes = plt.subplots(1, 2, figsize=self.size, width_ratios=[1.6, 1])
-        fig.subplots_adjust(left=0.08, right=0.98, bottom=0.24, top=0.9, wspace=0.25)  # no layout engine per frame
+        fig.subplots_adjust(left=0.09, right=0.98, bottom=0.25, top=0.9, wspace=0.25)  # no layout engine per frame
         artists = self._axes(axes)
         anim = animation.FuncAnimation(
             fig, lambda k: self._draw(artists, self.frames[picked[k]]), frames=len(picked), interval=interval_ms
         )
-        # Animation.to_jshtml, with a JPEG quality it does not let one pass.
-        writer = animation.HTMLWriter(fps=1000 / interval_ms, embed_frames=True, default_mode="once")
-        writer.frame_format = "jpeg"
-        with tempfile.TemporaryDirectory() as folder:
-            path = Path(folder, "animation.html")
-            anim.save(str(path), writer=writer, dpi=dpi, savefig_kwargs={"pil_kwargs": {"quality": quality}})
-            html = path.read_text()
+        html = embedded_frames(anim, interval_ms, "once", dpi, quality)
         plt.close(fig)
-        return offline_player(html)
+        return offline_player(html, round(self.size[0] * DPI))
 
     def _redraw(self) -> None:
         from IPython.display import display
@@ -151,7 +142,10 @@ class LiveView:
         overview.set(xlim=(lo[0] - pad, hi[0] + pad), ylim=(lo[1] - pad, hi[1] + pad), ylabel="y (m)")
         window = Rectangle((0, 0), 2 * self.zoom, 2 * self.zoom, fill=False, color="black", lw=1)
         overview.add_patch(window)
-        overview.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=4, fontsize=8, markerscale=4)
+        # Under both panels: under the left one alone, its four entries would not fit in the type they need.
+        figure = overview.figure
+        where = "outside lower center" if figure.get_layout_engine() else "lower center"
+        figure.legend(*overview.get_legend_handles_labels(), loc=where, ncol=4, fontsize=TEXT_PT, markerscale=4)
         zoom.set_title(f"around the drone (\u00b1{self.zoom:.0f} m)", fontsize=10)
         title = overview.set_title("", fontsize=10)
         return {"panels": panels, "window": window, "title": title}

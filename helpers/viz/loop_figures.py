@@ -8,7 +8,7 @@ from matplotlib.patches import Circle
 
 from helpers.geometry import transform_points
 from helpers.quality.metrics import FALSE_LOOP_DEG, FALSE_LOOP_M
-from helpers.viz.style import COLORS, FIGURE_WIDTH, GREY, LIGHT, grid, xy_of
+from helpers.viz.style import COLORS, FIGURE_WIDTH, GREY, LIGHT, TEXT_PT, grid, xy_of
 
 
 def candidates_figure(
@@ -30,7 +30,7 @@ def candidates_figure(
     submaps are ringed in orange, matched ones filled orange."""
     c = xy_of(centres)
     p = np.asarray(position)[:2]
-    fig, ax = plt.subplots(figsize=(9, 6.2), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 6.2), constrained_layout=True)
     ax.plot(c[:, 0], c[:, 1], color=LIGHT, lw=1, zorder=1)
     ax.scatter(*c[n_eligible:].T, s=26, color="white", edgecolor=GREY, zorder=2, label="too recent")
     ax.scatter(*c[:n_eligible].T, s=18, color="black", zorder=3, label="eligible submap centre")
@@ -90,7 +90,7 @@ def candidates_figure(
         ylabel="y (m)",
     )
     grid(ax)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=TEXT_PT)
     return fig
 
 
@@ -157,7 +157,7 @@ def search_radius_figure(true, apparent, found, base_radius: float, radius=None)
         aspect="equal",
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.02, 1.0))
+    ax.legend(fontsize=TEXT_PT, loc="upper left", bbox_to_anchor=(1.02, 1.0))
     return fig
 
 
@@ -194,7 +194,7 @@ def pair_overlay_figure(moving, fixed, stages: dict, half_width: float = 60.0, s
     axes[1, 0].set_ylabel("z (m), slab across the track")
     for key, name in (("fixed", "fixed: the old scan"), ("moving", "moving: the current scan")):
         axes[1, -1].plot([], [], ".", ms=8, color=COLORS[key], label=name)
-    axes[1, -1].legend(loc="best", fontsize=9, framealpha=0.95)  # the side view has free corners
+    axes[1, -1].legend(loc="best", fontsize=TEXT_PT, framealpha=0.95)  # the side view has free corners
     return fig
 
 
@@ -207,7 +207,7 @@ def rmse_offsets_figure(offsets, point_to_point, surface):
     ax.plot(offsets, surface, "o-", color=COLORS["loop"], lw=2, label="RMSE along the normals (ours)")
     ax.set(xlabel="shift along the track from the true alignment (m)", ylabel="score (m)", ylim=(0, None))
     grid(ax)
-    ax.legend(fontsize=9)
+    ax.legend(fontsize=TEXT_PT)
     return fig
 
 
@@ -240,7 +240,7 @@ def overlap_rounds_figure(moving, fixed, whole, kept, errors_m):
     top.invert_xaxis()
     top.set(aspect="equal", xlabel="y (m)", ylabel="x, forward (m)", title="where the whole scan's answer puts it")
     key.axis("off")
-    key.legend(loc="center", fontsize=9, frameon=False)
+    key.legend(loc="center", fontsize=TEXT_PT, frameon=False)
     rounds.plot(np.arange(len(errors_m)), errors_m, "o-", color=COLORS["loop"], lw=2)
     rounds.set(xlabel="round (0: the whole scan)", ylabel="from the truth (m)", ylim=(0, None))
     rounds.set_xticks(np.arange(len(errors_m)))
@@ -252,7 +252,7 @@ def queries_figure(nodes, tried, best, accepted, thresholds: dict):
     """Every loop query: each submap registered (small grey dots), the best
     scan-to-scan match of queries that found a submap (orange if it became
     a loop edge, black cross if not), and the thresholds."""
-    fig, ax = plt.subplots(figsize=(10, 4.2), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 4.2), constrained_layout=True)
     xs = np.concatenate([np.full(len(t), n) for n, t in zip(nodes, tried, strict=True)])
     ys = np.concatenate(tried)
     ax.scatter(xs, ys, s=10, color=GREY, label="a submap registered (its RMSE)", zorder=2)
@@ -285,7 +285,7 @@ def queries_figure(nodes, tried, best, accepted, thresholds: dict):
     top = min(max(float(np.nanmax(ys)), *thresholds.values()) * 1.15, 3.0)
     ax.set(xlabel="node (accepted scan) of the query", ylabel="RMSE along the normals (m)", ylim=(0, top))
     grid(ax)
-    ax.legend(fontsize=9, loc="upper left", bbox_to_anchor=(1.01, 1.0))
+    ax.legend(fontsize=TEXT_PT, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     return fig
 
 
@@ -323,5 +323,5 @@ def loop_errors_figure(error_m, error_deg, limits=(FALSE_LOOP_M, FALSE_LOOP_DEG)
         ylim=(low_y, high_y),
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="lower right")
+    ax.legend(fontsize=TEXT_PT, loc="lower right")
     return fig

@@ -8,7 +8,7 @@ import numpy as np
 
 from helpers.quality.evaluation import run_metrics
 from helpers.quality.metrics import ate, rpe
-from helpers.viz.style import COLORS, FIGURE_WIDTH, grid, xy_of
+from helpers.viz.style import COLORS, FIGURE_WIDTH, TEXT_PT, grid, xy_of
 
 
 def comparison_rows(runs: dict) -> list[tuple[str, str, dict]]:
@@ -52,7 +52,7 @@ def error_histograms_figure(maps: dict, top_m: float = 2.0):
     xlabel = f"distance to the ground-truth map (m); last bin: {top_m:g} m and more"
     ax.set(xlabel=xlabel, ylabel="map points", yscale="log")
     grid(ax)
-    ax.legend(fontsize=9)
+    ax.legend(fontsize=TEXT_PT)
     return fig
 
 
@@ -103,7 +103,7 @@ def runs_figure(ground_truth, optimized: dict, colors: dict, odometry: dict | No
         plt.Rectangle(centre - zoom_m, 2 * zoom_m, 2 * zoom_m, fill=False, edgecolor="black", lw=1.2, zorder=5)
     )
     whole.set_title("optimised trajectories from above (the square: the window on the right)")
-    whole.legend(fontsize=9, loc="center")
+    whole.legend(fontsize=TEXT_PT, loc="center")
     zoom.set(xlim=(centre[0] - zoom_m, centre[0] + zoom_m), ylim=(centre[1] - zoom_m, centre[1] + zoom_m))
     zoom.set_title(f"where the {first} is farthest off", fontsize=10)
     flown = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(gt, axis=0), axis=1))]
@@ -114,5 +114,5 @@ def runs_figure(ground_truth, optimized: dict, colors: dict, odometry: dict | No
     along.set(xlabel="distance flown (m)", ylabel="position error (m)", ylim=(0, None), xlim=(0, flown[-1]))
     along.set_title("distance from the true position, pose by pose", fontsize=10)
     grid(along)
-    along.legend(fontsize=9, loc="upper left", ncol=2)
+    along.legend(fontsize=TEXT_PT, loc="upper left", ncol=2)
     return fig

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.patches import Circle, Polygon
 
 from helpers.config.tables import REFERENCE_WORKFLOW, STAGE_TABLES, Config, describe
-from helpers.viz.style import COLORS, FIGURE_WIDTH, HEIGHT_CMAP, grid
+from helpers.viz.style import COLORS, FIGURE_WIDTH, HEIGHT_CMAP, TEXT_PT, grid
 
 MATCH_COLORS = {"inlier": "#6a3d9a", "outlier": "#b0b0b0"}  # purple: kept by the robust fit; grey: rejected
 CORRECT_COLORS = {"correct": "#6a3d9a", "wrong": "#d0d0d0"}  # the same idea, judged by the ground truth
@@ -78,7 +78,7 @@ def _mark_default(ax, x, label="default", top=True):
         xycoords=("data", "axes fraction"),
         xytext=(3, offset),
         textcoords="offset points",
-        fontsize=9,
+        fontsize=TEXT_PT,
         color="#555555",
     )
 
@@ -100,7 +100,7 @@ def grid_steps_figure(scan, clouds: dict, window=((-20.0, 20.0), (-60.0, 60.0)))
     panels = {"raw scan": scan, **{f"grid_step {step:g} m": cloud for step, cloud in clouds.items()}}
     low, high = np.percentile(inside(scan)[:, 2], [1, 99])
     fig, axes = plt.subplots(
-        len(panels), 1, figsize=(10, 2.1 * len(panels) + 0.6), sharex=True, constrained_layout=True
+        len(panels), 1, figsize=(FIGURE_WIDTH, 2.1 * len(panels) + 0.6), sharex=True, constrained_layout=True
     )
     for ax, (title, points) in zip(axes, panels.items(), strict=True):
         part = inside(points)
@@ -138,7 +138,7 @@ def neighbourhood_figure(points, centre: int, neighbourhoods: dict, cell: float,
         ylabel="x, forward (m)",
         title=f"what a descriptor sees: its k nearest points ({cell:g} m grid)",
     )
-    ax.legend(loc="upper right", fontsize=9, framealpha=0.95)
+    ax.legend(loc="upper right", fontsize=TEXT_PT, framealpha=0.95)
     return fig
 
 
@@ -161,7 +161,7 @@ def descriptor_distance_figure(examples: dict, threshold: float, ratio: float):
         ax.set_title(f"{title}: $d_1/d_2$ = {d1 / d2:.3f}, {verdict}", loc="left")
         ax.set(xlabel="normalised descriptor distance", yscale="log")
         _grid(ax)
-        ax.legend(fontsize=8, loc="upper right")
+        ax.legend(fontsize=TEXT_PT, loc="upper right")
     np.atleast_1d(axes)[0].set_ylabel("fixed descriptors")
     return fig
 
@@ -182,7 +182,7 @@ def trials_formula_figure(max_trials: int = 3000, confidences=(0.9, 0.99, 0.999)
         caps.append((pairs_cap, f"its cap for samples of 2 = {pairs_cap}"))
     for cap, label in caps:
         ax.axhline(cap, color="black", ls=":", lw=1.4)
-        ax.annotate(label, (0.8, cap), xytext=(-4, 4), textcoords="offset points", ha="right", fontsize=9)
+        ax.annotate(label, (0.8, cap), xytext=(-4, 4), textcoords="offset points", ha="right", fontsize=TEXT_PT)
     ax.set(
         xscale="linear",
         yscale="log",
@@ -192,7 +192,7 @@ def trials_formula_figure(max_trials: int = 3000, confidences=(0.9, 0.99, 0.999)
         xlim=(0.04, 0.8),
     )
     _grid(ax)
-    ax.legend(fontsize=9)
+    ax.legend(fontsize=TEXT_PT)
     return fig
 
 
@@ -228,7 +228,7 @@ def footprints_figure(outlines: dict, overlap: dict, default: int = 3):
         ylabel="y, map (m)",
         title="footprints on the ground",
     )
-    left.legend(fontsize=9, loc="best")
+    left.legend(fontsize=TEXT_PT, loc="best")
     _grid(left)
     gaps = sorted(overlap)
     right.plot(gaps, [100 * overlap[g] for g in gaps], "o-", color=COLORS["fixed"], lw=2)

@@ -6,11 +6,16 @@ from __future__ import annotations
 
 import re
 
-import matplotlib
 import matplotlib.pyplot as plt
 import numpy as np
 
-from helpers.viz.style import HEIGHT_CMAP
+from helpers.viz.style import DPI, HEIGHT_CMAP, TEXT_PT
+
+# An animation's frames are drawn at the figures' DPI and shown at that size, so their text is as large as a
+# figure's (10 pt: 11 px); the notebook embeds every frame, so they are not drawn larger. JPEG of Pillow's
+# default quality.
+FRAME_DPI = DPI
+FRAME_QUALITY = 75
 
 # Matplotlib's animation buttons draw Font Awesome icons fetched from a CDN,
 # blank offline; these characters need no font download.
@@ -52,7 +57,8 @@ def top_down(points: np.ndarray, half_width: float, half_length: float, cell: fl
 def scan_player(scans: list[np.ndarray], indices, interval_ms: int = 200, size=(7.5, 2.6)):
     """An HTML animation (play, pause, step) of scans seen from above in the
     sensor frame, coloured by height: the notebook's "pcplayer". The frames
-    are embedded, so it plays in a static HTML export too."""
+    are embedded, so it plays in a static HTML export too; ``size`` (inches)
+    is shown at the figures' DPI, its text no smaller than theirs."""
     from matplotlib import animation
 
     indices = list(indices)
@@ -72,7 +78,9 @@ def scan_player(scans: list[np.ndarray], indices, interval_ms: int = 200, size=(
         vmax=hi,
         interpolation="nearest",
     )
-    fig.colorbar(image, ax=ax, label="z, sensor frame (m)", pad=0.01)
+    bar = fig.colorbar(image, ax=ax, pad=0.01)
+    bar.set_label("z, sensor frame (m)", fontsize=TEXT_PT)
+    bar.ax.tick_params(labelsize=TEXT_PT)
     ax.set(xlabel="y, to the left of the drone (m)", ylabel="x, forward (m)")
     ax.invert_xaxis()  # seen from above with x up, +y is on the left
     label = ax.set_title("")
@@ -83,14 +91,32 @@ def scan_player(scans: list[np.ndarray], indices, interval_ms: int = 200, size=(
         return image, label
 
     anim = animation.FuncAnimation(fig, draw, frames=len(indices), interval=interval_ms, blit=False)
-    with matplotlib.rc_context({"animation.frame_format": "jpeg", "savefig.dpi": 72}):
-        html = anim.to_jshtml(default_mode="loop")
+    html = embedded_frames(anim, interval_ms, "loop")
     plt.close(fig)
-    return offline_player(html)
+    return offline_player(html, round(size[0] * DPI))
 
 
-def offline_player(html: str) -> str:
+def embedded_frames(anim, interval_ms: int, mode: str, dpi: int = FRAME_DPI, quality: int = FRAME_QUALITY) -> str:
+    """``anim`` as matplotlib's HTML animation (``Animation.to_jshtml``), its frames JPEGs of ``quality``
+    drawn at ``dpi``, which ``to_jshtml`` does not let one choose."""
+    import tempfile
+    from pathlib import Path
+
+    from matplotlib import animation
+
+    writer = animation.HTMLWriter(fps=1000 / interval_ms, embed_frames=True, default_mode=mode)
+    writer.frame_format = "jpeg"
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder, "animation.html")
+        anim.save(str(path), writer=writer, dpi=dpi, savefig_kwargs={"pil_kwargs": {"quality": quality}})
+        return path.read_text()
+
+
+def offline_player(html: str, width: int | None = None) -> str:
     """Matplotlib's animation HTML without its one network resource: the
-    Font Awesome style sheet goes, and each button icon becomes a character."""
+    Font Awesome style sheet goes, and each button icon becomes a character.
+    ``width``: the CSS pixels its frames are shown at (they are drawn larger, to stay sharp)."""
     html = re.sub(r"<link[^>]*font-awesome[^>]*>\s*", "", html)
+    if width is not None:
+        html = re.sub(r'(<img id="_anim_img\w*")', rf'\1 width="{width}"', html, count=1)
     return re.sub(r'<i class="fa ([^"]+)"></i>', lambda m: PLAYER_ICONS.get(m.group(1), m.group(0)), html)

@@ -13,7 +13,7 @@ from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from helpers.geometry import transform_points
 from helpers.viz.parameter_figures import MATCH_COLORS, _grid
-from helpers.viz.style import COLORS, ERROR_CMAP, FIGURE_WIDTH
+from helpers.viz.style import COLORS, ERROR_CMAP, FIGURE_WIDTH, TEXT_PT
 
 HISTOGRAM_NAMES = ("theta", "alpha", "phi")  # FPFH's three 11-bin histograms, in Open3D's bin order
 HISTOGRAM_COLORS = ("#4c72b0", "#dd8452", "#55a868")
@@ -51,8 +51,8 @@ def clouds_figure(moving, fixed, names=("moving", "fixed"), zoom_m: float = 40.0
     ax.set(xlabel="y, to the left of the drone (m)", title="the two scans, each in its own frame")
     ax.invert_xaxis()
     ax.add_patch(Rectangle((window[1], window[2]), zoom_m, zoom_m, fill=False, edgecolor="black", lw=1.2))
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=2, fontsize=9, markerscale=6, frameon=False)
-    title = f"zoom, {zoom_m:g} m square:\npoints {above_m:g} m above the ground"
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.28), ncol=2, fontsize=TEXT_PT, markerscale=6, frameon=False)
+    title = f"zoom, {zoom_m:g} m square:\npoints {above_m:g} m above\nthe ground"  # as narrow as its panel
     zoom.set(xlim=window[:2], ylim=window[2:], xlabel="y (m)", title=title)
     return fig
 
@@ -62,7 +62,7 @@ def descriptor_figure(descriptors: dict):
 
     ``descriptors`` maps a label to a (33,) normalised descriptor; the first
     is drawn as bars, the others as outlined steps over it."""
-    fig, ax = plt.subplots(figsize=(10, 3.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.6), constrained_layout=True)
     bins = np.arange(33)
     items = list(descriptors.items())
     label, first = items[0]
@@ -93,7 +93,7 @@ def descriptor_figure(descriptors: dict):
         [one_per_angle, *handles],
         [label, *labels],
         handler_map={tuple: HandlerTuple(ndivide=None, pad=0.2)},
-        fontsize=9,
+        fontsize=TEXT_PT,
         loc="upper right",
     )
     return fig
@@ -128,7 +128,7 @@ def matches_figure(moving, fixed, matches, inliers, shown: int = 80, gap: float 
     ax.invert_xaxis()
     ax.text(0.01, 0.97, "moving", transform=ax.transAxes, color=COLORS["moving"], fontweight="bold", va="top")
     ax.text(0.01, 0.03, "fixed", transform=ax.transAxes, color=COLORS["fixed"], fontweight="bold")
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=9, frameon=False)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=2, fontsize=TEXT_PT, frameon=False)
     return fig
 
 
@@ -139,7 +139,9 @@ def profile_figure(moving, fixed, stages: dict, y: float, half_width: float = 0.
     doubled roofs and walls. ``stages`` maps a title to a 4 x 4 transform
     applied to ``moving``."""
     n = len(stages)
-    fig, axes = plt.subplots(n, 1, figsize=(10, 2.2 * n + 0.4), sharex=True, sharey=True, constrained_layout=True)
+    fig, axes = plt.subplots(
+        n, 1, figsize=(FIGURE_WIDTH, 2.2 * n + 0.4), sharex=True, sharey=True, constrained_layout=True
+    )
     for ax, (title, transform) in zip(np.atleast_1d(axes), stages.items(), strict=True):
         moved = transform_points(moving, transform)
         for points, key, marker in ((fixed, "fixed", "o"), (moved, "moving", "o")):
@@ -148,7 +150,8 @@ def profile_figure(moving, fixed, stages: dict, y: float, half_width: float = 0.
         ax.set_title(title, loc="left")
         ax.set_ylabel("z (m)")
         _grid(ax)
-    axes[0].legend(loc="upper right", fontsize=9, ncol=2, framealpha=0.95)
+    # On the first panel's title line, right: inside, it covered the points of a roof.
+    axes[0].legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), fontsize=TEXT_PT, ncol=2, frameon=False)
     axes[-1].set_xlabel("x, forward (m)")
     return fig
 
@@ -161,7 +164,7 @@ def surface_error_figure(moving, errors: dict, low: float = 0.01, high: float = 
     is logarithmic from ``low`` to ``high`` metres, on a map with no white
     end, so that a centimetre and a metre both show."""
     n = len(errors)
-    fig, axes = plt.subplots(n, 1, figsize=(10, 2.3 * n + 0.6), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(n, 1, figsize=(FIGURE_WIDTH, 2.3 * n + 0.6), sharex=True, constrained_layout=True)
     axes = np.atleast_1d(axes)
     norm = LogNorm(low, high, clip=True)
     for ax, (title, distance) in zip(axes, errors.items(), strict=True):
@@ -235,5 +238,5 @@ def icp_convergence_figure(runs: dict):
     for ax in axes:
         _grid(ax)
     axes[2].set_ylim(0, None)
-    axes[0].legend(fontsize=9)
+    axes[0].legend(fontsize=TEXT_PT)
     return fig

@@ -1,5 +1,7 @@
 """The look shared by every picture: one colour per thing in all seven
-notebooks, the height and error colour maps, the size of a 3-D view, the grid.
+notebooks, the height and error colour maps, the size of a 3-D view, the grid,
+and the sizes of figures and their type, so that no text of a picture is
+under 11 px where the book shows it.
 
 Both colour maps are perceptually uniform and end in a saturated colour, not
 near white: on the white background of the 3-D views a near-white top made
@@ -25,9 +27,34 @@ CLASS_COLORS = ("#b9a77c", "#6b6b6b", "#3a7dc9", "#c1440e", "#2f7d32")  # by hel
 HEIGHT_CMAP = "viridis"  # heights: dark violet (low) to yellow (high)
 ERROR_CMAP = "plasma"  # errors and distances: dark blue (small) to yellow (large)
 WINDOW = (900, 600)  # pixels of a 3-D view
-# inches: the widest figure, 800 px at the notebooks' 80 dpi, about the book's column; a wider one is shrunk
-# to fit and its legends and ticks with it
-FIGURE_WIDTH = 10.0
+
+# The size of what a picture says. A figure is shown DPI CSS pixels to the inch (drawn at twice that, to stay
+# sharp), so a type of TEXT_PT points is TEXT_PT * DPI / 72 pixels tall on the page, as long as the figure is
+# no wider than the column that shows it: a wider one is shrunk to fit, its legends and ticks with it. The
+# book's text column is BOOK_COLUMN_PX wide on a 1366 px laptop screen (729 px there, beside the two
+# sidebars), so the widest figure, FIGURE_WIDTH, fits it whole; no text in a picture is then under
+# MIN_TEXT_PX, against the page's 16 px text. A phone shows the figure smaller: a tap opens it alone, to zoom.
+DPI = 80
+BOOK_COLUMN_PX = 720
+FIGURE_WIDTH = 8.9  # inches: 712 px, and a few more for the tight frame around it
+MIN_TEXT_PX = 11
+TEXT_PT = 10  # the smallest type: ticks, legends, notes (matplotlib's default size); titles are larger
+SHARPNESS = 2  # a picture is drawn at this many pixels per CSS pixel it is shown at
+
+
+def shown_text_px(points: float, width_px: float, shown_px: float | None = None) -> float:
+    """How tall a type of ``points`` looks in a picture drawn ``width_px`` CSS pixels wide (at DPI) and
+    shown ``shown_px`` wide (by default the book's column, or less if the picture is narrower)."""
+    shown = min(width_px, BOOK_COLUMN_PX) if shown_px is None else shown_px
+    return points * DPI / 72 * shown / width_px
+
+
+def view_text_px(window_width: int, shown_px: float) -> int:
+    """The type size (pixels) for the text of a 3-D view rendered ``window_width`` pixels wide and shown
+    ``shown_px`` wide, so that it is MIN_TEXT_PX tall as shown."""
+    return max(MIN_TEXT_PX, int(np.ceil(MIN_TEXT_PX * window_width / shown_px)))
+
+
 GREY = "#9a9a9a"  # what is there but not the point (too recent submaps, ...)
 LIGHT = "#d9d9d9"
 

@@ -9,7 +9,20 @@ from matplotlib.patches import Circle
 
 from helpers.viz.parameter_figures import MATCH_COLORS
 from helpers.viz.render import pyvista
-from helpers.viz.style import COLORS, GREY, HEIGHT_CMAP, LIGHT, grid, inset_zoom, scale_bar, xy_of
+from helpers.viz.style import (
+    BOOK_COLUMN_PX,
+    COLORS,
+    FIGURE_WIDTH,
+    GREY,
+    HEIGHT_CMAP,
+    LIGHT,
+    TEXT_PT,
+    grid,
+    inset_zoom,
+    scale_bar,
+    view_text_px,
+    xy_of,
+)
 
 
 def submap_panels(
@@ -32,6 +45,7 @@ def submap_panels(
     heading /= np.linalg.norm(heading)
     elevation = np.radians(68.0)
     direction = -np.cos(elevation) * heading + np.array([0.0, 0.0, np.sin(elevation)])
+    text_px = view_text_px(window[0], min(window[0], BOOK_COLUMN_PX))  # 11 px where the book shows it
     plotter = pv.Plotter(off_screen=True, window_size=list(window), shape=(len(clouds), 1), border=False)
     plotter.set_background("white")
     for k, (points, title) in enumerate(zip(clouds, titles, strict=True)):
@@ -54,9 +68,12 @@ def submap_panels(
                 "height": 0.8,
                 "width": 0.05,
                 "fmt": "%.0f",
+                "title_font_size": text_px,
+                "label_font_size": text_px,
             },
         )
-        plotter.add_text(f"{title}: {len(points)} points", font_size=11, color="black")
+        # PyVista doubles a title's size: text_px, a little larger
+        plotter.add_text(f"{title}: {len(points)} points", font_size=max(11, round(0.6 * text_px)), color="black")
         plotter.camera_position = [tuple(focal + 0.56 * width * direction), tuple(focal), (0.0, 0.0, 1.0)]
     image = plotter.screenshot(return_img=True)
     plotter.close()
@@ -70,7 +87,7 @@ def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_poi
     submap truly is (``true_centres``): the drift is metres on a loop of
     hundreds, too small to see at the scale of the whole flight."""
     gt, odo, c, true = xy_of(ground_truth), xy_of(odometry), xy_of(centres), xy_of(true_centres)
-    fig, ax = plt.subplots(figsize=(10, 5.6), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.6), constrained_layout=True)
 
     def draw(axis, dot=22):
         if map_points is not None:
@@ -98,7 +115,7 @@ def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_poi
         c[0],
         xytext=(-12, 12),
         textcoords="offset points",
-        fontsize=9,
+        fontsize=TEXT_PT,
         ha="right",
         bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
     )
@@ -107,12 +124,12 @@ def submap_centres_figure(ground_truth, odometry, centres, true_centres, map_poi
         c[-1],
         xytext=(12, -14),
         textcoords="offset points",
-        fontsize=9,
+        fontsize=TEXT_PT,
         bbox={"boxstyle": "round,pad=0.2", "fc": "white", "ec": "none", "alpha": 0.85},
     )
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="submap centres along the flight, seen from above")
     grid(ax)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=TEXT_PT)
     x, y = c[-1]
     window = (x - zoom_m / 2, x + zoom_m / 2, y - zoom_m / 2, y + zoom_m / 2)
     inset_zoom(
@@ -138,7 +155,7 @@ def recent_rule_figure(centres, position, n_excluded: int, radius: float, title:
     c = xy_of(centres)
     eligible = c[: max(0, len(c) - n_excluded)]
     excluded = c[len(eligible) :]
-    fig, ax = plt.subplots(figsize=(10, 5.4), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.4), constrained_layout=True)
     ax.plot(c[:, 0], c[:, 1], color=LIGHT, lw=1, zorder=1)
     ax.scatter(*eligible.T, s=22, color="black", zorder=3, label=f"eligible ({len(eligible)} oldest)")
     ax.scatter(*excluded.T, s=30, color="white", edgecolor=GREY, zorder=3, label=f"too recent ({len(excluded)} newest)")
@@ -160,7 +177,7 @@ def recent_rule_figure(centres, position, n_excluded: int, radius: float, title:
         )
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title=title)
     grid(ax)
-    ax.legend(loc="center", fontsize=9)
+    ax.legend(loc="center", fontsize=TEXT_PT)
     return fig
 
 
@@ -173,7 +190,7 @@ def submap_merge_figure(scans_worth, turn_deg, n_scans_per_submap: int, turn_lim
     worth, turn = np.asarray(scans_worth, float), np.asarray(turn_deg, float)
     ids = np.arange(len(worth))
     turning = turn > turn_limit
-    fig, ax = plt.subplots(figsize=(10, 3.8), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 3.8), constrained_layout=True)
     ax.axhline(n_scans_per_submap, color="black", ls="--", lw=1.2, label=f"{n_scans_per_submap} scans stacked")
     ax.axhline(1.0, color=GREY, ls=":", lw=1.2, label="one scan")
     ax.plot(ids, worth, color=LIGHT, lw=1, zorder=1)
@@ -195,7 +212,7 @@ def submap_merge_figure(scans_worth, turn_deg, n_scans_per_submap: int, turn_lim
         title="what the grid merge keeps of overlapping scans",
     )
     grid(ax)
-    ax.legend(fontsize=9, loc="center right", bbox_to_anchor=(1.0, 0.62))
+    ax.legend(fontsize=TEXT_PT, loc="center right", bbox_to_anchor=(1.0, 0.62))
     return fig
 
 
@@ -209,7 +226,7 @@ def trajectory_figure(
     metres are invisible at the scale of the whole flight."""
     gt, est = xy_of(ground_truth), xy_of(estimated)
     color = COLORS["odometry"] if label == "odometry" else COLORS["optimized"]
-    fig, ax = plt.subplots(figsize=(9, 5.4), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(FIGURE_WIDTH, 5.4), constrained_layout=True)
 
     def draw(axis, marker_size=6):
         axis.plot(gt[:, 0], gt[:, 1], color=COLORS["ground_truth"], lw=2.5, label="ground truth")
@@ -223,7 +240,7 @@ def trajectory_figure(
     ax.plot(*gt[0], "o", color="black", ms=7, label="start")
     ax.set(xlabel="x (m)", ylabel="y (m)", aspect="equal", title="trajectory seen from above")
     grid(ax, color="#e5e5e5", open_frame=True)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=9)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=TEXT_PT)
     if zoom_m:
         centre = (gt[-1] + est[-1]) / 2
         window = (centre[0] - zoom_m / 2, centre[0] + zoom_m / 2, centre[1] - zoom_m / 2, centre[1] + zoom_m / 2)
@@ -237,7 +254,7 @@ def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, positio
     error they add up to. ``turning`` (one bool per step) shades the turns."""
     indices = np.asarray(indices)
     steps = indices[1:]
-    fig, axes = plt.subplots(4, 1, figsize=(10, 8.6), sharex=True, constrained_layout=True)
+    fig, axes = plt.subplots(4, 1, figsize=(FIGURE_WIDTH, 8.6), sharex=True, constrained_layout=True)
     panels = (
         (steps, translation_cm, "translation error (cm)", "error of each scan-to-scan motion"),
         (steps, rotation_deg, "rotation error (deg)", None),
@@ -257,7 +274,7 @@ def step_errors_figure(indices, translation_cm, rotation_deg, n_inliers, positio
             _shade(ax, steps, np.asarray(turning, bool))
     if turning is not None:
         axes[0].fill_between([], [], color="#f3c623", alpha=0.25, label="turning")
-        axes[0].legend(loc="upper right", fontsize=9)
+        axes[0].legend(loc="upper right", fontsize=TEXT_PT)
     return fig
 
 

@@ -8,7 +8,7 @@ import numpy as np
 from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
 
 from helpers.viz.parameter_figures import CORRECT_COLORS, MATCH_COLORS, _grid, _mark_default
-from helpers.viz.style import COLORS, FIGURE_WIDTH
+from helpers.viz.style import COLORS, FIGURE_WIDTH, TEXT_PT
 
 
 def _stacked_matches(ax, x, correct, total, width, xlabel, default, log=False):
@@ -62,7 +62,7 @@ def matching_figure(thresholds, th_correct, th_total, ratios, ra_correct, ra_tot
 def _legend(ax, twin):
     handles, labels = ax.get_legend_handles_labels()
     h2, l2 = twin.get_legend_handles_labels()
-    ax.legend(handles + h2, labels + l2, loc="upper left", fontsize=9, framealpha=0.9)
+    ax.legend(handles + h2, labels + l2, loc="upper left", fontsize=TEXT_PT, framealpha=0.9)
 
 
 def skip_frames_figure(gaps, overlap, n_inliers, error_cm, failed, default: int = 3):
@@ -81,9 +81,10 @@ def skip_frames_figure(gaps, overlap, n_inliers, error_cm, failed, default: int 
     axes[2].yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
     axes[2].yaxis.set_major_formatter(FormatStrFormatter("%g"))
     axes[2].yaxis.set_minor_formatter(NullFormatter())
-    axes[2].legend(fontsize=9, loc="upper left")
+    # Above the panel, not in it: inside, it covered the "default" mark or the points, whichever the gaps gave.
+    fig.legend(*axes[2].get_legend_handles_labels(), loc="outside upper right", ncols=2, fontsize=TEXT_PT)
+    fig.supxlabel("skip_frames (scans between the two)", fontsize=TEXT_PT)  # once: three would not fit under
     for ax in axes:
-        ax.set_xlabel("skip_frames (scans between the two)")
         ax.set_xticks(gaps)
         _grid(ax)
         _mark_default(ax, default)
@@ -117,5 +118,5 @@ def trials_figure(trials, probability, success, w: float, default: int = 3000):
     ax.minorticks_off()
     _grid(ax)
     _mark_default(ax, default, top=False)
-    ax.legend(fontsize=9, loc="upper left")
+    ax.legend(fontsize=TEXT_PT, loc="upper left")
     return fig
