@@ -8,8 +8,10 @@ import pytest
 
 from helpers.config.tables import Config
 from helpers.errors import SlamError
-from helpers.exercises.loops import check_false_loop, check_search_radius
+from helpers.exercises.loops import check_row_slip, check_search_radius
 from helpers.slam.pipeline import Edge
+from helpers.slam.registration.icp import icp_rmse
+from helpers.slam.registration.icp_service import surface_rmse
 
 
 def pose(x, y, yaw_deg=0.0):
@@ -83,18 +85,41 @@ def test_search_radius_uncertainty(capsys):
     assert "search_sigmas" in capsys.readouterr().out
 
 
-def test_false_loop(capsys):
-    poses_gt = np.array([pose(0, 0), pose(5, 1, 10), pose(9, 3, 20)])
-    truth = np.linalg.inv(poses_gt[0]) @ poses_gt[2]
-    right = Edge(0, 2, truth @ pose(0.3, 0, 0.5), 0.2)
-    wrong = Edge(0, 2, truth @ pose(0.2, 0, 3.0), 0.2)  # a small shift, but turned too far
-    assert check_false_loop(poses_gt, right, 0.3, 0.5, False)
-    assert check_false_loop(poses_gt, wrong, 0.2, 3.0, True)
-    assert capsys.readouterr().out.count("correct:") == 2
-    assert not check_false_loop(poses_gt, wrong, 0.2, 3.0, False)  # the verdict
-    assert not check_false_loop(poses_gt, right, 0.5, 0.5, False)  # the distance
-    assert not check_false_loop(poses_gt, right, None, 0.5, False)
-    assert capsys.readouterr().out.count("not yet:") == 3
+def row_slip_run(rmse_threshold):
+    """Two scans of rolling ground with a house, the second taken 6 m further along x and turned by 5 deg;
+    the run's loop edge between them is right, and a copy of it slipped 2.1 m along the track is not."""
+    x, y = np.meshgrid(np.arange(-30.0, 30.0, 0.7), np.arange(-20.0, 20.0, 0.7))
+    z = 2.0 * np.sin(x / 7.0) * np.cos(y / 5.0) + 6.0 * ((np.abs(x - 4) < 5) & (np.abs(y) < 4))
+    ground = np.column_stack([x.ravel(), y.ravel(), z.ravel()])
+    T_true = pose(6.0, 0.0, 5.0)
+    moving = ground @ np.linalg.inv(T_true)[:3, :3].T + np.linalg.inv(T_true)[:3, 3]
+    config = Config().with_values(loop_closure={"rmse_threshold": rmse_threshold})
+    result = SimpleNamespace(config=config, indices=np.array([0, 1]), clouds=[ground, moving])
+    dataset = SimpleNamespace(poses=np.array([np.eye(4), T_true]))
+    slipped = pose(2.1, 0.0) @ T_true
+    return result, dataset, Edge(0, 1, T_true, 0.0), Edge(0, 1, slipped, 0.0)
+
+
+def test_row_slip(capsys):
+    result, dataset, right, slipped = row_slip_run(rmse_threshold=10.0)
+    moving, fixed = result.clouds[1], result.clouds[0]
+    score = surface_rmse(moving, fixed, slipped.relative, 3.0)
+    assert surface_rmse(moving, fixed, right.relative, 3.0) < 0.01 < score < 10.0
+    assert check_row_slip(result, dataset, slipped, True, score, True)
+    assert "a false loop edge, and its score is under rmse_threshold" in capsys.readouterr().out
+    strict, _, _, _ = row_slip_run(rmse_threshold=score / 2)
+    assert check_row_slip(strict, dataset, slipped, True, score, False)
+    assert "the threshold refuses it" in capsys.readouterr().out
+    assert check_row_slip(result, dataset, right, False, 0.0, True)
+    assert "a right loop edge" in capsys.readouterr().out
+    assert not check_row_slip(result, dataset, slipped, False, score, True)  # the verdict
+    assert "how far off" in capsys.readouterr().out
+    p2p = icp_rmse(moving, fixed, slipped.relative, 3.0)
+    assert not check_row_slip(result, dataset, slipped, True, p2p, True)  # the point-to-point RMSE
+    assert "point-to-point" in capsys.readouterr().out
+    assert not check_row_slip(result, dataset, slipped, True, score, False)  # the threshold's answer
+    assert not check_row_slip(result, dataset, slipped, None, score, True)
+    assert capsys.readouterr().out.count("not yet:") == 2
 
 
 def test_fixed_radius(monkeypatch, capsys):

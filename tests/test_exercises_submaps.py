@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 from helpers.config.tables import Config
+from helpers.errors import SlamError
 from helpers.exercises.submaps import check_centre_and_reach, check_eligible
-from helpers.slam.submaps import SubmapIndex
+from helpers.slam.submaps import SubmapIndex, build_submap
 
 
 @pytest.fixture(scope="module")
@@ -34,6 +35,23 @@ def test_centre_and_reach(run, capsys):
     assert not check_centre_and_reach(run, 4, centre, reach + 1.0)
     assert not check_centre_and_reach(run, 4, None, None)
     assert capsys.readouterr().out.count("not yet:") == 3
+
+
+def test_centre_and_reach_of_a_submap_of_five_scans(run, capsys):
+    """Submap 3 of five scans: nodes 15 to 19 merged by build_submap, its pose node 17's."""
+    nodes = list(range(15, 20))
+    points = build_submap([run.clouds[m] for m in nodes], run.poses_odometry[nodes], run.config.map.align_grid_step)
+    centre = run.poses_odometry[17][:3, 3]
+    reach = np.linalg.norm(points[:, :2] - centre[:2], axis=1).max()
+    assert check_centre_and_reach(run, 3, centre, reach, 5)
+    assert "submap 3 of 5 scans" in capsys.readouterr().out
+    three = run.submaps.submaps[3]  # the run's own submap 3, of three scans: nodes 9 to 11
+    assert not check_centre_and_reach(run, 3, three.centre, reach, 5)
+    assert "nodes 15 to 19" in capsys.readouterr().out
+    assert not check_centre_and_reach(run, 3, centre, np.linalg.norm(three.points[:, :2] - centre[:2], axis=1).max(), 5)
+    assert "build_submap" in capsys.readouterr().out
+    with pytest.raises(SlamError):
+        check_centre_and_reach(run, 12, centre, reach, 5)  # 60 scans hold submaps 0 to 11 of five
 
 
 def test_eligible(run, capsys):

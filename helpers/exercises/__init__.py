@@ -17,10 +17,10 @@ are imported from here (``from helpers.exercises import check_grid_step``).
 from __future__ import annotations
 
 from helpers.exercises.dataset import check_edge_ray, check_scans_seeing
-from helpers.exercises.loops import check_false_loop, check_fixed_radius, check_search_radius, search_graph
-from helpers.exercises.maps import check_aligned_ate, check_median_map_error
+from helpers.exercises.loops import check_fixed_radius, check_row_slip, check_search_radius, search_graph
+from helpers.exercises.maps import check_aligned_ate, check_true_rotation_map
 from helpers.exercises.parameters import check_grid_step, check_skip_frames
-from helpers.exercises.registration import check_least_share, check_rotation_angle
+from helpers.exercises.registration import check_least_share, check_msac_cost
 from helpers.exercises.report import report, say, unanswered
 from helpers.exercises.submaps import check_centre_and_reach, check_eligible
 
@@ -29,15 +29,15 @@ __all__ = [
     "check_centre_and_reach",
     "check_edge_ray",
     "check_eligible",
-    "check_false_loop",
     "check_fixed_radius",
     "check_grid_step",
     "check_least_share",
-    "check_median_map_error",
-    "check_rotation_angle",
+    "check_msac_cost",
+    "check_row_slip",
     "check_scans_seeing",
     "check_search_radius",
     "check_skip_frames",
+    "check_true_rotation_map",
     "report",
     "say",
     "search_graph",

@@ -17,6 +17,8 @@ from helpers.quality.metrics import FALSE_LOOP_DEG, FALSE_LOOP_M, is_false_loop
 from helpers.slam.graph.factors import Edge
 from helpers.slam.loops.search import distance_flown_since, mahalanobis_gate, radius_after
 from helpers.slam.loops.uncertainty import RelativeUncertainty
+from helpers.slam.registration.icp import icp_rmse
+from helpers.slam.registration.icp_service import surface_rmse
 from helpers.slam.submaps import centre_scan_id
 
 
@@ -89,33 +91,37 @@ def check_search_radius(result, node: int, submap_id: int, radius) -> bool:
     return report(False, "", hint)
 
 
-def _loop_edge_error(poses_gt, edge) -> tuple[float, float]:
-    """How far a loop edge (``i``, ``j``, ``relative``) is from the true
-    relative pose of its nodes (``poses_gt``: the true poses of the nodes): (m, deg),
-    as :func:`helpers.quality.evaluation.loop_error` grades it."""
-    return loop_error(poses_gt, edge)
-
-
-def check_false_loop(poses_gt, edge, error_m, error_deg, is_false) -> bool:
-    """Exercise 5.2: the translation (m) and rotation (deg) error of ``edge``
-    against the truth, and whether it counts as a false loop edge."""
-    if any(unanswered(a) for a in (error_m, error_deg, is_false)):
-        return report(False, "", "fill in the two errors and the verdict (True or False)")
-    true_m, true_deg = _loop_edge_error(poses_gt, edge)
-    if not (abs(float(error_m) - true_m) < 0.01 and abs(float(error_deg) - true_deg) < 0.01):
+def check_row_slip(result, dataset, edge, is_false, rmse, accepted) -> bool:
+    """Exercise 5.2: a loop ``edge`` of ``result`` moved off its match: whether it is false by the truth
+    (:func:`helpers.quality.metrics.is_false_loop`), the score the run gives it (the surface RMSE of the
+    scan of node ``j`` where the edge puts it over the old scan of node ``i``) and whether the run's
+    ``rmse_threshold`` accepts it."""
+    if any(unanswered(a) for a in (is_false, rmse, accepted)):
+        return report(False, "", "fill in the verdict, the score and whether the threshold accepts it")
+    error_m, error_deg = loop_error(dataset.poses[result.indices], edge)
+    false = is_false_loop(error_m, error_deg)
+    moving, fixed = result.clouds[edge.j], result.clouds[edge.i]
+    inlier_distance = result.config.registration.inlier_distance
+    threshold = result.config.loop_closure.rmse_threshold
+    score = surface_rmse(moving, fixed, edge.relative, inlier_distance)
+    if bool(is_false) != false:
+        limits = f"{FALSE_LOOP_M:g} m or {FALSE_LOOP_DEG:g} deg"
+        return report(False, "", f"an edge is false beyond {limits} of the truth: how far off did the shift put it?")
+    if not abs(float(rmse) - score) < 0.01:
+        if abs(float(rmse) - icp_rmse(moving, fixed, edge.relative, inlier_distance)) < 0.01:
+            return report(False, "", "that is the point-to-point RMSE: the run scores along the normals (5.3)")
         return report(
             False,
             "",
-            "the error transform is inv(true relative pose) @ edge.relative, with the true relative pose "
-            "inv(poses_gt[i]) @ poses_gt[j]; its translation's length and its rotation angle are the errors",
+            "the score is surface_rmse(moving, fixed, edge.relative, inlier_distance): the scan of node j "
+            "where the edge puts it, over the old scan of node i",
         )
-    false = is_false_loop(true_m, true_deg)
-    if bool(is_false) != false:
-        return report(False, "", f"an edge is false beyond {FALSE_LOOP_M:g} m OR beyond {FALSE_LOOP_DEG:g} deg")
-    limits = f"{FALSE_LOOP_M:g} m and {FALSE_LOOP_DEG:g} deg"
-    if false:
-        return report(True, f"outside {limits} of the truth: a false loop edge", "")
-    return report(True, f"within {limits} of the truth: a right loop edge", "")
+    if bool(accepted) != (score < threshold):
+        return report(False, "", "a loop edge is accepted when its score is below settings.rmse_threshold")
+    verdict = "a false loop edge" if false else "a right loop edge"
+    if score < threshold:
+        return report(True, f"{verdict}, and its score is under rmse_threshold: the threshold would accept it", "")
+    return report(True, f"{verdict}, and its score is over rmse_threshold: the threshold refuses it", "")
 
 
 def _fixed_radius_loops(result, end: int) -> list[int]:

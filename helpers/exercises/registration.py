@@ -2,47 +2,55 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from helpers.exercises.report import say, unanswered
-from helpers.geometry import rotation_angle_deg
 from helpers.slam.registration.msac import SAMPLE_SIZE
 
-
-def _rotations(count: int, seed: int = 0) -> np.ndarray:
-    """(count, 4, 4) transforms with random axes, angles spread over [0, 180] deg, and random shifts."""
-    rng = np.random.default_rng(seed)
-    angles = np.radians(np.r_[0.0, 1e-3, 0.5, 179.9, 180.0, rng.uniform(0, 180, count - 5)])
-    axes = rng.normal(size=(count, 3))
-    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
-    out = np.tile(np.eye(4), (count, 1, 1))
-    for T, axis, angle in zip(out, axes, angles, strict=True):
-        k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-        T[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k  # Rodrigues
-        T[:3, 3] = rng.normal(scale=10.0, size=3)
-    return out
+COST_TOLERANCE = 1e-6  # relative: a learner's cost this close to the check's is right
 
 
-def check_rotation_angle(angle_deg, count: int = 20, tolerance: float = 1e-4) -> None:
-    """Exercise 3.1: ``angle_deg(T)`` returns the rotation angle of a 4 x 4 transform in degrees."""
-    if unanswered(angle_deg):
-        return say(False, "", "define `angle_deg(T)`, then run this cell again")
-    transforms = _rotations(count)
-    truth = rotation_angle_deg(transforms)
-    try:
-        answers = np.array([float(angle_deg(T)) for T in transforms])
-    except Exception as exc:  # a learner's function may raise anything
-        return say(False, "", f"angle_deg raised {type(exc).__name__}: {exc}")
-    wrong = np.flatnonzero(~(np.abs(answers - truth) <= tolerance))
-    if len(wrong):
-        i = wrong[0]
-        hint = f"for a rotation of {truth[i]:.4f} deg angle_deg gives {answers[i]:.4f}"
-        if np.any(np.isnan(answers)):
-            hint += " (a NaN: keep the cosine within [-1, 1] with np.clip)"
-        return say(False, "", hint)
-    return say(True, f"angle_deg gives the angle of all {count} test rotations, 0 and 180 deg included", "")
+def _msac_cost(T: np.ndarray, moving: np.ndarray, fixed: np.ndarray, max_distance: float) -> float:
+    """MSAC's truncated cost of the motion ``T`` on matched points: the sum over the
+    matches of min(r^2, max_distance^2), r the distance from a moved ``moving`` point to its ``fixed`` partner."""
+    residual = np.linalg.norm(moving @ T[:3, :3].T + T[:3, 3] - fixed, axis=1)
+    return float(np.minimum(residual**2, max_distance**2).sum())
+
+
+def _near(value: float, truth: float) -> bool:
+    return abs(value - truth) <= COST_TOLERANCE * max(abs(truth), 1.0)
+
+
+def _what_it_computed(value: float, T: np.ndarray, moving, fixed, max_distance: float) -> str:
+    """A hint naming the score ``value`` is when it is not MSAC's cost."""
+    residual = np.linalg.norm(moving @ T[:3, :3].T + T[:3, 3] - fixed, axis=1)
+    if _near(value, float(np.sum(residual**2))):
+        return "a match farther off than max_distance costs max_distance squared, however far off it is"
+    if _near(value, float(np.minimum(residual, max_distance).sum())):
+        return "square the residuals (and max_distance) before adding them up"
+    if _near(value, float(np.sum(residual < max_distance))):
+        return "that counts the inliers, RANSAC's score: MSAC adds up each match's squared residual, truncated"
+    return "each match costs min(r^2, max_distance^2), r the distance from T @ its moving point to its fixed point"
+
+
+def check_msac_cost(msac_cost, moving, fixed, max_distance: float, motions: dict) -> None:
+    """Exercise 3.1: ``msac_cost(T)`` is MSAC's truncated cost of a 4 x 4 motion on the matched points
+    ``moving`` -> ``fixed`` (K x 3 each); tried on ``motions`` (names to 4 x 4 motions), whose cheapest it names."""
+    if unanswered(msac_cost):
+        return say(False, "", "define `msac_cost(T)`, then run this cell again")
+    moving, fixed = np.asarray(moving, float), np.asarray(fixed, float)
+    truth = {name: _msac_cost(np.asarray(T, float), moving, fixed, max_distance) for name, T in motions.items()}
+    for name, T in motions.items():
+        try:
+            answer = float(msac_cost(np.asarray(T, float)))
+        except Exception as exc:  # a learner's function may raise anything
+            return say(False, "", f"msac_cost raised {type(exc).__name__}: {exc}")
+        if not _near(answer, truth[name]):
+            return say(False, "", f"for {name}: {_what_it_computed(answer, T, moving, fixed, max_distance)}")
+    names = list(motions)
+    cheapest = min(names, key=truth.get)
+    below = f", less than {names[0]}" if cheapest != names[0] else ""
+    return say(True, f"msac_cost agrees on all {len(names)} motions; {cheapest} costs least{below}", "")
 
 
 def _least_share(max_trials: int, confidence: float) -> float:

@@ -1,7 +1,8 @@
 """Checks for the exercises of notebook 4 (submaps).
 
-Each check reads the truth from the run it is given (the pipeline's own
-submaps, or a library call on them) and prints one line.
+Each check reads the truth from the run it is given (its scans and odometry
+poses merged as the pipeline merges them, or the loop closer's own rule) and
+prints one line.
 """
 
 from __future__ import annotations
@@ -10,34 +11,49 @@ from dataclasses import replace
 
 import numpy as np
 
+from helpers.errors import SlamError
 from helpers.exercises.report import report, unanswered
 from helpers.slam.loops import closer as loop_rules
+from helpers.slam.submaps import build_submap, centre_scan_id
 
 
-def _submap_reach(submap) -> tuple[np.ndarray, float]:
-    """A submap's centre (its pose's position) and its reach: the largest
-    horizontal distance (m) from the centre to one of its points."""
-    centre = np.asarray(submap.centre, float)
-    return centre, float(np.linalg.norm(submap.points[:, :2] - centre[:2], axis=1).max())
+def _submap_reach(result, submap_id: int, n_scans: int) -> tuple[np.ndarray, float, range]:
+    """Submap ``submap_id`` of ``result`` had it held ``n_scans`` accepted scans: its centre (its middle
+    scan's odometry position), its reach (the largest horizontal distance, m, from the centre to one of its
+    points, the scans merged as the pipeline merges them) and its nodes."""
+    nodes = range(submap_id * n_scans, (submap_id + 1) * n_scans)
+    if nodes.stop > len(result.clouds):
+        raise SlamError(f"the run has {len(result.clouds)} accepted scans: submap {submap_id} of {n_scans} lacks some")
+    poses = result.poses_odometry[list(nodes)]
+    points = build_submap([result.clouds[m] for m in nodes], poses, result.config.map.align_grid_step)
+    centre = result.poses_odometry[centre_scan_id(submap_id, n_scans)][:3, 3]
+    return centre, float(np.linalg.norm(points[:, :2] - centre[:2], axis=1).max()), nodes
 
 
-def check_centre_and_reach(result, submap_id: int, centre, reach) -> bool:
-    """Exercise 4.1: the centre (3 numbers, m) and the reach (m) of submap ``submap_id`` of ``result``."""
+def check_centre_and_reach(result, submap_id: int, centre, reach, n_scans: int | None = None) -> bool:
+    """Exercise 4.1: the centre (3 numbers, m) and the reach (m) of submap ``submap_id`` of ``result``, the
+    submaps holding ``n_scans`` accepted scans each (None: the run's ``n_scans_per_submap``)."""
     if unanswered(centre) or unanswered(reach):
         return report(False, "", "fill in both the centre and the reach")
-    submap = result.submaps.submaps[submap_id]
-    true_centre, true_reach = _submap_reach(submap)
+    n_scans = n_scans or result.config.map.n_scans_per_submap
+    true_centre, true_reach, nodes = _submap_reach(result, submap_id, n_scans)
     centre = np.asarray(centre, float).ravel()
     if centre.shape != (3,) or not np.allclose(centre, true_centre, atol=1e-6):
-        middle = submap.scan_ids[len(submap.scan_ids) // 2]
-        return report(False, "", f"the centre is the position of the middle scan's odometry pose (node {middle})")
+        return report(
+            False,
+            "",
+            f"with {n_scans} scans a submap, submap {submap_id} holds nodes {nodes[0]} to {nodes[-1]}; "
+            "its centre is the position of its middle scan's odometry pose",
+        )
     if not abs(float(reach) - true_reach) < 0.01:
-        return report(False, "", "the reach is the largest distance in x-y from the centre to a point of the submap")
-    return report(
-        True,
-        f"submap {submap_id} reaches {true_reach // 10 * 10:.0f}-{true_reach // 10 * 10 + 10:.0f} m from its centre",
-        "",
-    )
+        return report(
+            False,
+            "",
+            "the reach is the largest x-y distance from the centre to a point of the submap, its scans merged "
+            "by build_submap on align_grid_step",
+        )
+    low = true_reach // 10 * 10
+    return report(True, f"submap {submap_id} of {n_scans} scans reaches {low:.0f}-{low + 10:.0f} m from its centre", "")
 
 
 def _eligible_submaps(result, node: int, sub_map_thresh: int) -> np.ndarray:

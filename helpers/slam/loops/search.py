@@ -264,7 +264,7 @@ def mahalanobis_gate(
 
     Place ``k`` (its centre, map frame) is in reach when the offset to it,
     less ``radius`` (the place's extent, m; one number or one per place), is within
-    ``sigmas`` of its uncertainty: ``d' = d (1 - radius / |d|)`` and
+    ``sigmas`` of its uncertainty: ``d' = d max(0, 1 - radius / |d|)`` and
     ``d'^T C^-1 d' < sigmas^2`` with ``C = covariances[k]``. The radius along
     the direction ``u`` of the offset follows: ``radius + sigmas /
     sqrt(u^T C^-1 u)``, so that the gate is ``|d| < that radius``; with
