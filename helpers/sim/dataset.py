@@ -17,6 +17,7 @@ from helpers.geometry import transform_points
 from helpers.progress import progress_bar
 from helpers.sim.gnss import simulate_gnss
 from helpers.sim.maps import IDENTITY_FRAME, MapFrame, height_field_from_points, read_map
+from helpers.sim.risley import scan_motion
 from helpers.sim.scene import HeightField, default_scene
 from helpers.sim.sensor import (
     ScanBatch,
@@ -40,10 +41,14 @@ MAP_CELL = 1.0  # m, cell of the surface built from a LAS/LAZ tile (the referenc
 class LazyScans(Sequence):
     """The scans of a flight, each cast when it is asked for and not kept:
     the same points as casting the whole flight at once (each scan's noise
-    has its own seed), in memory that does not grow with the flight."""
+    has its own seed), in memory that does not grow with the flight. A Risley
+    scan's per-point times: :meth:`times` (the scan read last, or cast again)."""
 
     def __init__(self, surface: Surface, poses: np.ndarray, sensor: SensorConfig) -> None:
         self.surface, self.poses, self.sensor = surface, poses, sensor
+        self.has_times = sensor.pattern == "risley"
+        self.motion = scan_motion(poses, sensor) if self.has_times else None
+        self._times_of, self._times = None, None  # the scan read last and its per-point times
 
     def __len__(self) -> int:
         return len(self.poses)
@@ -52,11 +57,24 @@ class LazyScans(Sequence):
         if isinstance(index, slice):
             return [self[i] for i in range(*index.indices(len(self)))]
         index = range(len(self))[index]  # negative indices; IndexError past the end
-        return self.cast(index, index + 1).scans[0]
+        batch = self.cast(index, index + 1)
+        if batch.times is not None:
+            self._times_of, self._times = index, batch.times[0]
+        return batch.scans[0]
+
+    def times(self, index: int) -> np.ndarray | None:
+        """Scan ``index``'s per-point times from its start, s (None for the fan, which scans in an instant)."""
+        if not self.has_times:
+            return None
+        index = range(len(self))[index]
+        if self._times_of != index:
+            self[index]  # cast again; it keeps its times
+        return self._times
 
     def cast(self, start: int, stop: int, progress=None) -> ScanBatch:
         """Scans ``start`` to ``stop - 1`` with their true hits."""
-        return cast_scans(self.surface, self.poses[start:stop], self.sensor, progress, first_index=start)
+        motion = None if self.motion is None else self.motion[start:stop]
+        return cast_scans(self.surface, self.poses[start:stop], self.sensor, progress, start, motion)
 
 
 @dataclass
@@ -72,9 +90,21 @@ class Dataset:
     name: str
     truth: ScanBatch | None = None  # the true hits (None until first asked for, with LazyScans)
     gnss: np.ndarray | None = None  # (N, 3) simulated GNSS positions, map frame (None: no GNSS, the default)
+    scan_times: list[np.ndarray] | None = None  # (Ni,) s of each point from its scan's start (Risley, not lazy)
 
     def __len__(self) -> int:
         return len(self.scans)
+
+    @property
+    def has_times(self) -> bool:
+        """Whether the scans' points carry times (the Risley pattern; the fan scans in an instant)."""
+        return self.scan_times is not None or bool(getattr(self.scans, "has_times", False))
+
+    def times(self, index: int) -> np.ndarray | None:
+        """Scan ``index``'s per-point times from its start, s, or None: what ``run_slam(times=...)`` takes."""
+        if self.scan_times is not None:
+            return self.scan_times[index]
+        return self.scans.times(index) if self.has_times else None
 
     @property
     def map_points(self) -> np.ndarray:
@@ -151,6 +181,7 @@ def create_dataset(
     check_coverage(field, xyz, given)
     check_heights(field, xyz, given)
     sensor.check_flight(len(xyz))
+    sensor.check_waypoints(xyz)
     poses = poses_from_waypoints(xyz)
     surface = Surface.from_height_field(field)
     gnss = None
@@ -171,7 +202,7 @@ def create_dataset(
             "those waypoints see no map within max_range"
         )
     truth = ScanBatch([], batch.hits)
-    return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, truth, gnss)
+    return Dataset(batch.scans, poses, xyz, field, frame, sensor, name, truth, gnss, batch.times)
 
 
 def is_default(dataset: Dataset, sensor: SensorConfig) -> bool:

@@ -1,5 +1,6 @@
-"""The simulated aerial lidar: a fixed fan of rays, cast from every waypoint
-against a triangle surface with Open3D's ``RaycastingScene``.
+"""The simulated aerial lidar: a fixed fan of rays (the reference's, the default) or a Risley
+rosette (:mod:`.risley`), cast from every waypoint against a triangle surface with Open3D's
+``RaycastingScene``.
 
 Frames. The *sensor frame* has its origin at the waypoint, x along the
 direction of travel, y to the left and z up; every ray points downwards. A
@@ -8,7 +9,8 @@ pose ``T`` (4 x 4) maps sensor coordinates to map coordinates:
 
 A ray with azimuth ``a`` (across track) and elevation ``e`` (along track) has
 the sensor-frame direction ``(sin e, cos e sin a, -cos e cos a)``; its angle
-from the nadir ``theta`` obeys ``cos theta = cos e cos a``.
+from the nadir ``theta`` obeys ``cos theta = cos e cos a``. The fan scans in an instant; a Risley scan's
+points each carry their time and are cast from the pose of that time (:mod:`.risley`).
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import open3d as o3d
 from helpers.config.bounds import angle_count
 from helpers.config.sensor import SensorConfig
 from helpers.errors import SlamError
+from helpers.sim.risley import ScanMotion, ray_times, risley_directions, scan_motion
 from helpers.sim.scene import HeightField
 
 RAYS_PER_CAST = 200_000  # rays sent to Embree in one call (a 5 MB buffer, reused)
@@ -66,7 +69,10 @@ def _angles(start: float, stop: float, step: float) -> np.ndarray:
 
 def ray_pattern(sensor: SensorConfig) -> np.ndarray:
     """Unit ray directions in the sensor frame, (n_elevation * n_azimuth, 3),
-    elevation-major (reshape to (n_elevation, n_azimuth, 3) for an image)."""
+    elevation-major (reshape to (n_elevation, n_azimuth, 3) for an image); for the Risley
+    pattern, its first scan's rays (k, 3) in time order (:func:`.risley.ray_times`)."""
+    if sensor.pattern == "risley":
+        return risley_directions(sensor, np.zeros(1))[0]
     az = _angles(*sensor.azimuth)
     el = _angles(*sensor.elevation)
     e, a = np.meshgrid(el, az, indexing="ij")
@@ -100,9 +106,17 @@ class ScanBatch:
     scans: list[np.ndarray]  # (Ni, 3) float64 points in the sensor frame (with noise)
     hits: np.ndarray  # (sum Ni, 3) float32 true surface points in the map frame, scan after scan
     labels: np.ndarray | None = None  # (sum Ni,) uint8 class of each hit's cell (None until asked: Dataset.map_labels)
+    times: list[np.ndarray] | None = None  # (Ni,) s of each point from its scan's start (Risley; the fan: None)
 
 
-def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progress=None, first_index=0) -> ScanBatch:
+def cast_scans(
+    surface: Surface,
+    poses: np.ndarray,
+    sensor: SensorConfig,
+    progress=None,
+    first_index=0,
+    motion: ScanMotion | None = None,
+) -> ScanBatch:
     """Cast the ray pattern from every pose and keep the returns.
 
     Ranges beyond ``max_range`` and misses give no point; each kept range gets
@@ -110,9 +124,20 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
     ``(sensor.seed, scan index)``, so a scan does not depend on the others:
     ``poses`` are the flight's scans ``first_index``, ``first_index + 1``, ...,
     and casting them alone gives the same points as casting the whole flight.
+
+    A Risley scan's rays are cast from the poses the drone passes during the scan, ``motion`` (the
+    flight's, :func:`.risley.scan_motion`, for these poses; None: ``poses`` are the whole flight); each
+    point comes back with its time (``ScanBatch.times``) in the sensor's frame of that time, as a driver
+    gives it, and the scan is given the pose of its start: the motion smears it until it is deskewed.
     """
-    pattern = ray_pattern(sensor).astype(np.float32)
-    k = len(pattern)
+    risley = sensor.pattern == "risley"
+    if risley:
+        motion = scan_motion(poses, sensor) if motion is None else motion
+        times, pattern = ray_times(sensor), None
+        k, stamps = len(times), []
+    else:
+        pattern = ray_pattern(sensor).astype(np.float32)
+        k, stamps = len(pattern), None
     scene = surface.scene
     per_call = max(1, RAYS_PER_CAST // k)
     rays = np.empty((min(per_call, len(poses)), k, 6), np.float32)  # reused by every call
@@ -122,8 +147,15 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         chunk = poses[first : first + per_call]
         n = len(chunk)
         batch = rays[:n]
-        batch[..., :3] = chunk[:, None, :3, 3]
-        np.matmul(pattern[None], chunk[:, :3, :3].transpose(0, 2, 1).astype(np.float32), out=batch[..., 3:])
+        if risley:  # each ray from where the sensor is at its time, in the frame of the scan's start
+            body = risley_directions(sensor, motion.start[first : first + n])  # (n, k, 3) in the sensor's frame
+            offsets, directions = motion[first : first + n].moving_rays(body, times)
+            rotations = chunk[:, :3, :3].transpose(0, 2, 1)  # rows times R^T: R @ each ray
+            batch[..., :3] = chunk[:, None, :3, 3] + offsets @ rotations
+            batch[..., 3:] = directions @ rotations
+        else:
+            batch[..., :3] = chunk[:, None, :3, 3]
+            np.matmul(pattern[None], chunk[:, :3, :3].transpose(0, 2, 1).astype(np.float32), out=batch[..., 3:])
         t = scene.cast_rays(o3d.core.Tensor(batch.reshape(-1, 6)))["t_hit"].numpy().reshape(n, k)
         noise, kept = _noise_and_dropout(sensor, first_index + first, n, k)
         ok = (t <= sensor.max_range) & kept  # a miss is inf
@@ -132,7 +164,11 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         t_ok = t.ravel()[flat]
         origin_and_direction = batch.reshape(-1, 6).take(flat, axis=0)
         hits[used : used + len(t_ok)] = origin_and_direction[:, :3] + t_ok[:, None] * origin_and_direction[:, 3:]
-        measured = (t_ok + noise.ravel()[flat])[:, None] * pattern.take(ray_of, axis=0)
+        if risley:  # the range along the ray in the sensor's frame of its time: no motion undone
+            measured = (t_ok + noise.ravel()[flat])[:, None] * body.reshape(-1, 3).take(flat, axis=0)
+            stamps += np.split(times[ray_of], np.cumsum(ok.sum(axis=1))[:-1])
+        else:
+            measured = (t_ok + noise.ravel()[flat])[:, None] * pattern.take(ray_of, axis=0)
         if not np.isfinite(measured).all():  # the config bounds the noise; this keeps a NaN out of every later stage
             bad = first_index + first + np.unique(flat[~np.isfinite(measured).all(axis=1)] // k)
             raise SlamError(
@@ -144,7 +180,8 @@ def cast_scans(surface: Surface, poses: np.ndarray, sensor: SensorConfig, progre
         if progress is not None:
             progress.update(n)
     hits = hits[:used]
-    return ScanBatch(scans, hits)  # the labels are looked up when asked for (labels_at: a quarter of the cast's time)
+    # the labels are looked up when asked for (labels_at: a quarter of the cast's time)
+    return ScanBatch(scans, hits, times=stamps)
 
 
 def _noise_and_dropout(sensor: SensorConfig, first: int, n: int, k: int):
