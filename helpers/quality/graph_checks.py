@@ -1,7 +1,8 @@
 """What the trust flag (:mod:`helpers.quality.trust`) reads from a run's pose graph: the graph rebuilt from the
 run's edges and optimised again with some loop edges left out (what the loops moved, how far doubtful
 loops still pull), where the optimised graph leaves each loop edge, the ATE the graph expects of its own
-trajectory (from its marginal covariances), and the scans that come back over ground flown earlier.
+trajectory (from its marginal covariances), how well the loops observe the flight's scale, and the scans
+that come back over ground flown earlier.
 Each is a measure, not a verdict: :func:`helpers.quality.trust.assess` turns them into one.
 """
 
@@ -13,7 +14,7 @@ import numpy as np
 from helpers.errors import SlamError
 from helpers.quality.metrics import is_false_loop
 from helpers.slam.graph.build import build_pose_graph
-from helpers.slam.graph.factors import FactorContext, pose3
+from helpers.slam.graph.factors import FactorContext, edge_information, pose3
 from helpers.slam.graph.information import SWAP_ROTATION_TRANSLATION, whitened
 from helpers.slam.loops.closer import radius_after
 
@@ -36,6 +37,39 @@ def expected_ate(result) -> float:
         result.graph.poses, result.graph.initial_poses[0], loop_kernel=result.config.pose_graph.loop_kernel
     )
     return float(np.sqrt(np.mean(sigmas**2)))
+
+
+def loop_scale(result) -> tuple[float, float, float]:
+    """How well the run's loop edges observe the flight's scale: (the scale's sigma, a share of 1, by
+    :func:`scale_sigma` at the optimised poses, each loop weighed by the information the graph gave it; the
+    RMS distance (m) of the nodes from the first, which a scale error of 1 moves them by; the longest lever,
+    m)."""
+    poses = np.asarray(result.graph.poses, dtype=float)
+    loops = result.loops
+    information = [edge_information(loop, result.config.pose_graph, loop=True) for loop in loops]
+    sigma, lever = scale_sigma(poses, [(loop.i, loop.j) for loop in loops], information)
+    reach = float(np.sqrt(np.mean(np.sum((poses[:, :3, 3] - poses[0, :3, 3]) ** 2, axis=1))))
+    return sigma, reach, lever
+
+
+def scale_sigma(poses: np.ndarray, pairs, information) -> tuple[float, float]:
+    """(sigma of a scale error of the whole flight, the longest lever in m) as loop edges observe it.
+
+    A flight whose step lengths are all off by a share ``s`` (a biased odometry) has every position moved
+    from the first by ``s`` times its offset from it, and the offset between the two ends of a loop edge
+    by ``s`` times that offset, the edge's *lever*. A loop that closes where the flight passed before
+    has almost none: a shrunk lap closes on a shrunk lap, and the edge agrees with both. Each edge
+    (``pairs`` of node indices into ``poses``, (N, 4, 4) map-frame, with its 6 x 6 translation-first
+    ``information``, in the frame of its first node) measures ``s`` with the information
+    ``lever' C^-1 lever``, C its translation covariance; the sigma is one over the root of their sum
+    (``inf`` with no loop, or none with a lever)."""
+    total, longest = 0.0, 0.0
+    for (i, j), info in zip(pairs, information, strict=True):
+        lever = poses[i, :3, :3].T @ (poses[j, :3, 3] - poses[i, :3, 3])  # in the frame of node i
+        covariance = np.linalg.inv(np.asarray(info, dtype=float))[:3, :3]
+        total += float(lever @ np.linalg.solve(covariance, lever))
+        longest = max(longest, float(np.linalg.norm(lever)))
+    return (1.0 / np.sqrt(total) if total > 0 else float("inf")), longest
 
 
 def loop_correction(result, rebuilt=None, without=None) -> float:

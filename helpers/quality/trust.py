@@ -72,6 +72,14 @@ loops hold the drift those rules saw: it is counted, not held against the
 run. Revisits that closed no loop stay a problem: the graph cannot see a loop
 it was never given.
 
+Whatever the verdict, the summary says how far the loops observe the flight's *scale*
+(:func:`helpers.quality.graph_checks.loop_scale`). A loop that closes where the flight passed before has
+no lever: a lap shrunk by biased step lengths closes on a lap shrunk alike, and the graph cannot see
+it (over canopy the steps come out up to a few per cent short, ``benchmarks/README.md``). Loops between
+neighbouring strips have levers of the strips' spacing and measure it. Unless a scale error of the
+loops' sigma moves the trajectory by at most :data:`MAX_EXPECTED_ATE_M`, the run says it vouches for
+no scale, and how far a bias of 1 % would move the trajectory unseen.
+
 The rules themselves, each a function that returns its problem or nothing,
 and the bars above, are in :mod:`helpers.quality.trust_rules`; :func:`assess` runs
 them and asks the graph (:func:`graph_answer`).
@@ -146,6 +154,28 @@ class Health:
                 else f"; {c['n_loops_off_the_rest']} loop edges far from the graph without them"
             )
             + ("" if c.get("expected_ate_m") is None else f"; the graph expects an ATE of {c['expected_ate_m']:.2f} m")
+            + self._scale()
+        )
+
+    def _scale(self) -> str:
+        """What the loops say of the flight's scale (:func:`helpers.quality.graph_checks.loop_scale`): observed
+        when a scale error of its sigma moves the trajectory by at most :data:`MAX_EXPECTED_ATE_M`, else said
+        unobserved, with what a bias of 1 % of the step lengths would move it by unseen."""
+        c = self.counts
+        if "moved_per_scale_pct_m" not in c:  # counts of an older run
+            return ""
+        sigma, per_pct, lever = c["loop_scale_sigma_pct"], c["moved_per_scale_pct_m"], c["longest_loop_lever_m"]
+        if sigma is not None and sigma * per_pct <= MAX_EXPECTED_ATE_M:
+            return f"; the loops observe the flight's scale to a sigma of {sigma:.2g} % (levers up to {lever:.0f} m)"
+        seen = (
+            "no loop observes the flight's scale"
+            if sigma is None
+            else f"the loops barely observe the flight's scale (a sigma of {sigma:.2g} %, levers up to {lever:.0f} m: "
+            "a loop that closes where the flight passed before has none)"
+        )
+        return (
+            f"; {seen}, so this run vouches for no scale: a bias of 1 % in the odometry's step lengths would move "
+            f"the trajectory by {per_pct:.2f} m"
         )
 
     def warning(self) -> str:

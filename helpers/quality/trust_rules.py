@@ -21,6 +21,7 @@ from helpers.quality.graph_checks import (
     expected_ate,
     loop_correction,
     loop_pull,
+    loop_scale,
     loops_against_graph,
     optimized_with,
     rebuilt_poses,
@@ -101,6 +102,7 @@ def facts_of(result) -> Facts:
     correction = loop_correction(result, rebuilt, without)
     against = loops_against_graph(result)
     pull = loop_pull(result, against, rebuilt)
+    scale, reach, lever = loop_scale(result)  # a scale error of 1 % moves the nodes by reach / 100 (RMS)
     counts = {
         "n_steps": steps,
         "n_fallbacks": len(fallbacks),
@@ -123,6 +125,9 @@ def facts_of(result) -> Facts:
         "expected_ate_m": None if expected is None else round(expected, 3),
         "loop_correction_sigmas": None,  # measured only when the drift rules name a run its loops may hold
         "n_loops_off_the_rest": None,  # the same
+        "loop_scale_sigma_pct": round(100 * float(scale), 3) if np.isfinite(scale) else None,  # None: no loop lever
+        "longest_loop_lever_m": round(float(lever), 1),
+        "moved_per_scale_pct_m": round(float(reach) / 100, 3),  # RMS, from the first node
     }
     return Facts(
         result, steps, fallbacks, poor, weak, flown, revisited, unclosed, rebuilt, without, held, expected, unknown,
