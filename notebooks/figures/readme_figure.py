@@ -8,16 +8,15 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 
+from helpers import default_run
 from helpers.viz import figures
-from helpers.slam.pipeline import default_run
 
-_, result = default_run()
-start = result.poses_gt[0, :2, 3]
+dataset, result = default_run()
 fig = figures.trajectories_figure(
-    result.poses_gt,
+    dataset.poses[result.indices],
     result.poses_odometry,
     result.poses_optimized,
-    inset=(start[0] - 40, start[0] + 40, start[1] - 7, start[1] + 7),  # where the end of the flight meets its start
+    zoom=None,
     title="the default flight: ground truth, odometry only, after loop closure and optimisation",
 )
 fig.savefig(Path(__file__).with_name("result.png"), dpi=80)
