@@ -472,3 +472,35 @@ def test_an_animation_with_figure_metadata_is_a_numbered_figure_with_its_caption
     assert found and 'id="_anim_imgabc"' in found.group(1), "the animation is not inside its figure"
     assert "Figure 1.1" in found.group(1) and figure["caption"] in found.group(1)
     assert 'alt="1. A page, figure 1.1, an animation"' in found.group(1)
+
+
+def test_the_script_of_the_landing_pictures_calls_what_the_package_has():
+    """``notebooks/figures/readme_figure.py`` draws the README's and the landing page's picture; it is run by
+    hand, so a move in the package could leave it broken unseen (it was, once): every name it imports from
+    ``helpers`` exists, and every keyword it passes to a figure function is one that function takes."""
+    import importlib
+    import inspect
+
+    script = ROOT / "notebooks" / "figures" / "readme_figure.py"
+    tree = ast.parse(script.read_text())
+    modules = {}
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and node.module.startswith("helpers"):
+            module = importlib.import_module(node.module)
+            for alias in node.names:
+                try:  # a name of the module, or a submodule of the package
+                    found = getattr(module, alias.name, None) or importlib.import_module(f"{node.module}.{alias.name}")
+                except ImportError:
+                    found = None
+                assert found is not None, f"{node.module} has no {alias.name}"
+                modules[alias.asname or alias.name] = found
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call) and isinstance(n.func, ast.Attribute)]
+    checked = 0
+    for call in calls:
+        owner = call.func.value
+        if isinstance(owner, ast.Name) and owner.id in modules:
+            function = getattr(modules[owner.id], call.func.attr)
+            parameters = inspect.signature(function).parameters
+            assert all(k.arg in parameters for k in call.keywords), f"{call.func.attr} takes no {call.keywords}"
+            checked += 1
+    assert checked >= 1
