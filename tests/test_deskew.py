@@ -52,3 +52,36 @@ def test_times_are_shares_of_the_scans_span():
     assert np.allclose(normalised(np.array([3.0, 3.0])), [0.5, 0.5])
     with pytest.raises(SlamError, match="finite"):
         normalised(np.array([0.0, np.nan]))
+
+
+def _slam_after_steps(step: np.ndarray, starts, span: float, skip: int = 1):
+    """A Slam whose odometry measured ``step`` (4 x 4) last, that has deskewed scans with times beginning at
+    ``starts`` (all but the last) and ``span`` s long: (the Slam, the last scan's times)."""
+    from helpers.config.tables import Config
+    from helpers.slam.slam import Slam
+
+    slam = Slam(Config().with_values(registration={"skip_frames": skip}))
+    for start in starts[:-1]:
+        slam._deskewed(np.zeros((3, 3)), start + np.array([0.0, span / 2, span]))
+    slam.odometry.relative.append(step)
+    return slam, starts[-1] + np.linspace(0.0, span, 4000)
+
+
+def test_a_scan_taken_in_part_of_a_step_is_deskewed_with_that_part_of_it():
+    """Scans of 0.1 s every 0.2 s on one clock (the simulator's Risley flights at 10 m/s with 2 m waypoints):
+    the last step took 0.2 s, so the scan's own motion is half of it. The smear of ``smeared_scan`` over
+    the scan's span is then undone by a step of two of its spans, to within a centimetre."""
+    seen, share, truth = smeared_scan()
+    slam, times = _slam_after_steps(pose_at(2.0), [10.0, 10.2, 10.4], span=0.1)
+    times = 10.4 + 0.1 * share  # each point's time on the clock, in the order of the smeared scan
+    assert np.linalg.norm(slam._deskewed(seen, times) - truth, axis=1).max() < 0.01
+    # Read as if each scan filled its step, the same scan would be deskewed twice too far.
+    assert np.linalg.norm(deskew(seen, share, pose_at(2.0)) - truth, axis=1).max() > 0.4
+
+
+def test_scans_whose_times_start_again_at_zero_fill_their_step():
+    """Times from each scan's own start (a PLY's per-scan field): the scans follow one another, and a step of
+    ``skip_frames`` scans spans that many of them."""
+    seen, share, truth = smeared_scan()
+    slam, _ = _slam_after_steps(pose_at(3.0), [0.0, 0.0, 0.0], span=0.1, skip=3)
+    assert np.linalg.norm(slam._deskewed(seen, 0.1 * share) - truth, axis=1).max() < 0.01

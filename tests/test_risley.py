@@ -79,7 +79,9 @@ def test_times_lie_within_the_scan_and_increase():
     for index in (0, 7, len(data) - 1):
         scan, stamps = data.scans[index], data.times(index)
         assert len(stamps) == len(scan) > 0.9 * RISLEY.rays_per_scan  # a few dropouts, nothing off the map
-        assert stamps.min() >= 0 and stamps.max() < RISLEY.scan_period and np.all(np.diff(stamps) > 0)
+        start = data.scans.motion.start[index]  # the scan's start on the flight's clock
+        assert stamps.min() >= start and stamps.max() < start + RISLEY.scan_period and np.all(np.diff(stamps) > 0)
+    assert data.scans.motion.start[7] > data.scans.motion.start[0]  # one clock across the flight
     # Cast lazily or all at once, scans and times are the same.
     batch = data.scans.cast(5, 8)
     assert all(np.array_equal(a, data.scans[i]) for i, a in zip(range(5, 8), batch.scans, strict=True))

@@ -240,7 +240,8 @@ def _run(args) -> int:
             *(f"  {line}" for line in reasons),
         )
     with _stage("running SLAM"):
-        result = run_slam(data, config, progress=interactive, gnss=gnss)
+        times = data.times if data.has_times else None  # a Risley sensor's points: each deskewed by its time
+        result = run_slam(data, config, progress=interactive, gnss=gnss, times=times)
     result.runtime_s = {"dataset": created, **result.runtime_s}
     with _stage("evaluating the run"):
         health = assess(result)

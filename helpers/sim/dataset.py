@@ -63,7 +63,7 @@ class LazyScans(Sequence):
         return batch.scans[0]
 
     def times(self, index: int) -> np.ndarray | None:
-        """Scan ``index``'s per-point times from its start, s (None for the fan, which scans in an instant)."""
+        """Scan ``index``'s per-point times on the flight's clock, s (None for the fan, which scans in an instant)."""
         if not self.has_times:
             return None
         index = range(len(self))[index]
@@ -90,7 +90,7 @@ class Dataset:
     name: str
     truth: ScanBatch | None = None  # the true hits (None until first asked for, with LazyScans)
     gnss: np.ndarray | None = None  # (N, 3) simulated GNSS positions, map frame (None: no GNSS, the default)
-    scan_times: list[np.ndarray] | None = None  # (Ni,) s of each point from its scan's start (Risley, not lazy)
+    scan_times: list[np.ndarray] | None = None  # (Ni,) s of each point on the flight's clock (Risley, not lazy)
 
     def __len__(self) -> int:
         return len(self.scans)

@@ -106,7 +106,7 @@ class ScanBatch:
     scans: list[np.ndarray]  # (Ni, 3) float64 points in the sensor frame (with noise)
     hits: np.ndarray  # (sum Ni, 3) float32 true surface points in the map frame, scan after scan
     labels: np.ndarray | None = None  # (sum Ni,) uint8 class of each hit's cell (None until asked: Dataset.map_labels)
-    times: list[np.ndarray] | None = None  # (Ni,) s of each point from its scan's start (Risley; the fan: None)
+    times: list[np.ndarray] | None = None  # (Ni,) s of each point on the flight's clock (Risley; the fan: None)
 
 
 def cast_scans(
@@ -127,7 +127,8 @@ def cast_scans(
 
     A Risley scan's rays are cast from the poses the drone passes during the scan, ``motion`` (the
     flight's, :func:`.risley.scan_motion`, for these poses; None: ``poses`` are the whole flight); each
-    point comes back with its time (``ScanBatch.times``) in the sensor's frame of that time, as a driver
+    point comes back with its time on the flight's clock (``ScanBatch.times``: the scan's start,
+    ``motion.start``, plus the ray's time in the scan) in the sensor's frame of that time, as a driver
     gives it, and the scan is given the pose of its start: the motion smears it until it is deskewed.
     """
     risley = sensor.pattern == "risley"
@@ -166,7 +167,8 @@ def cast_scans(
         hits[used : used + len(t_ok)] = origin_and_direction[:, :3] + t_ok[:, None] * origin_and_direction[:, 3:]
         if risley:  # the range along the ray in the sensor's frame of its time: no motion undone
             measured = (t_ok + noise.ravel()[flat])[:, None] * body.reshape(-1, 3).take(flat, axis=0)
-            stamps += np.split(times[ray_of], np.cumsum(ok.sum(axis=1))[:-1])
+            clock = times[ray_of] + np.repeat(motion.start[first : first + n], ok.sum(axis=1))  # the flight's
+            stamps += np.split(clock, np.cumsum(ok.sum(axis=1))[:-1])
         else:
             measured = (t_ok + noise.ravel()[flat])[:, None] * pattern.take(ray_of, axis=0)
         if not np.isfinite(measured).all():  # the config bounds the noise; this keeps a NaN out of every later stage

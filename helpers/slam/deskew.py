@@ -39,8 +39,9 @@ def deskew(points: np.ndarray, times: np.ndarray, motion: np.ndarray) -> np.ndar
     return rotations.apply(points) + translations
 
 
-def per_period(step: np.ndarray, periods: int) -> np.ndarray:
-    """The motion over one period when ``step`` (4 x 4) spans ``periods`` of them at a constant velocity."""
+def per_period(step: np.ndarray, periods: float) -> np.ndarray:
+    """The motion over one period when ``step`` (4 x 4) spans ``periods`` of them (any positive number) at a
+    constant velocity."""
     omega, v = _log(np.asarray(step, dtype=np.float64))
     rotation, translation = _exp(np.array([1.0 / periods]), omega, v)
     out = np.eye(4)

@@ -147,6 +147,7 @@ class Slam:
         self._given_fallbacks = set() if odometry is None else {int(i) for i, _ in odometry.fallbacks}
         self.clouds: list[np.ndarray] = []
         self.indices: list[int] = []
+        self._starts: list[float] = []  # the first point's time of the last two accepted scans with times
         self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)
 
     def accepts(self, index: int) -> bool:
@@ -169,12 +170,23 @@ class Slam:
             return self._process(scan, index, prepared)
 
     def _deskewed(self, scan: np.ndarray, times) -> np.ndarray:
-        """``scan`` deskewed with the odometry's last step, one scan period of it; as it is until the odometry
-        has measured a step (and with a given odometry, which registers nothing)."""
+        """``scan`` deskewed with the odometry's last step at a constant velocity; as it is until the odometry
+        has measured a step (and with a given odometry, which registers nothing).
+
+        The motion over the scan's own span is the last step's share of it: the span over the time the last
+        step took, when the times run on one clock across scans (LAS ``gps_time``, the simulator's flight
+        clock: a scan of 0.1 s taken every 0.2 s moved half a step while it was taken); when each scan's
+        times start again from zero, the scans are taken one after the other and a step of ``skip_frames``
+        scans spans that many of them."""
+        times = np.asarray(times, dtype=np.float64)
+        before = self._starts
+        self._starts = [*before[-1:], float(times.min())] if len(times) else before
         if self.given is not None or not self.odometry.relative:
             return scan
-        step = per_period(self.odometry.relative[-1], self.config.registration.skip_frames)
-        return deskew(scan, normalised(times), step)
+        interval = before[-1] - before[-2] if len(before) == 2 else 0.0  # the last step's, on the scans' clock
+        span = float(np.ptp(times)) if len(times) else 0.0
+        periods = interval / span if interval > 0 and span > 0 else self.config.registration.skip_frames
+        return deskew(scan, normalised(times), per_period(self.odometry.relative[-1], periods))
 
     def _process(self, scan: np.ndarray | None, index: int, prepared: Future | None) -> Step:
         if self.indices and index <= self.indices[-1]:
