@@ -44,7 +44,6 @@ from bench_ground import DATA, build_run
 import helpers.slam.odometry as odometry_module
 import helpers.slam.preprocess as preprocess_module
 import helpers.slam.registration.icp as icp_module
-from helpers.geometry import transform_points
 from helpers.slam.registration.icp import icp_cloud
 
 VARIANTS = ("shipped", "truth-map", "previous-scan", "voxel-map", "incidence-60")
@@ -67,7 +66,8 @@ def registering_with_index(self, frame, index):
 
 
 def voxel_gicp(moving, fixed, init, metric, inlier_distance, max_iterations, tolerance, source, voxel=1.0):
-    """small_gicp's VGICP onto Gaussian voxels of ``voxel`` m made from the fixed cloud."""
+    """small_gicp's VGICP onto Gaussian voxels of ``voxel`` m made from the fixed cloud, scored as the
+    package scores its own alignment."""
     voxels = small_gicp.GaussianVoxelMap(voxel)
     voxels.insert(fixed.cloud)
     result = small_gicp.align(
@@ -75,18 +75,7 @@ def voxel_gicp(moving, fixed, init, metric, inlier_distance, max_iterations, tol
         num_threads=1, max_iterations=int(max_iterations), rotation_epsilon=tolerance / max(moving.reach, 1.0),
         translation_epsilon=tolerance,
     )  # fmt: skip
-    transform = np.array(result.T_target_source)
-    squared, index = fixed.nearest(transform_points(moving.points, transform))
-    paired = squared < inlier_distance**2
-    rmse = float(np.sqrt(squared[paired].mean())) if paired.any() else float("inf")
-    if source == "plane":
-        nearest = lambda _: (squared, index)  # noqa: E731
-        information = icp_module.plane_information(
-            moving.points, fixed.points, fixed.normals, transform, inlier_distance, nearest
-        )
-    else:
-        information = icp_module.hessian_information(result.H, result.error, result.num_inliers)
-    return icp_module.IcpResult(transform, rmse, information, (squared, index))
+    return icp_module.scored_alignment(result, moving, fixed, metric, inlier_distance, source)
 
 
 def without_grazing(scan, config):

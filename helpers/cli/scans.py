@@ -241,9 +241,7 @@ def _read_ply(path: Path):
         elif fmt in ("binary_little_endian", "binary_big_endian"):
             order = "<" if fmt == "binary_little_endian" else ">"
             dtype = np.dtype([(name, order + kind) for name, kind in props])
-            records = np.fromfile(f, dtype=dtype, count=count)
-            if len(records) < count:
-                raise SlamError(f"it is truncated: {len(records)} of {count} vertices")
+            records = _binary_records(f, dtype, count, "vertices")
         else:
             raise SlamError(f"PLY format {fmt!r} is not ascii or binary")
     return _columns(records, names)
@@ -255,6 +253,14 @@ def _ascii_table(f, count: int, width: int, what: str) -> np.ndarray:
     if table.shape != (count, width):
         raise SlamError(f"it announces {count} {what} of {width} values, read {table.shape}")
     return table
+
+
+def _binary_records(f, dtype: np.dtype, count: int, what: str) -> np.ndarray:
+    """The ``count`` records of a binary body (PLY's vertices, PCD's points), as announced."""
+    records = np.fromfile(f, dtype=dtype, count=count)
+    if len(records) < count:
+        raise SlamError(f"it is truncated: {len(records)} of {count} {what}")
+    return records
 
 
 def _read_pcd(path: Path):
@@ -279,9 +285,7 @@ def _read_pcd(path: Path):
                     for n, s, t, c in zip(names, sizes, types, counts, strict=True)
                 ]
             )
-            records = np.fromfile(f, dtype=dtype, count=count)
-            if len(records) < count:
-                raise SlamError(f"it is truncated: {len(records)} of {count} points")
+            records = _binary_records(f, dtype, count, "points")
         else:
             raise SlamError(f"PCD DATA {kind} is not read (ascii or binary; save binary_compressed as binary)")
     return _columns(records, names)

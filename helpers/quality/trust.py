@@ -162,8 +162,6 @@ class Health:
         when a scale error of its sigma moves the trajectory by at most :data:`MAX_EXPECTED_ATE_M`, else said
         unobserved, with what a bias of 1 % of the step lengths would move it by unseen."""
         c = self.counts
-        if "moved_per_scale_pct_m" not in c:  # counts of an older run
-            return ""
         sigma, per_pct, lever = c["loop_scale_sigma_pct"], c["moved_per_scale_pct_m"], c["longest_loop_lever_m"]
         if sigma is not None and sigma * per_pct <= MAX_EXPECTED_ATE_M:
             return f"; the loops observe the flight's scale to a sigma of {sigma:.2g} % (levers up to {lever:.0f} m)"

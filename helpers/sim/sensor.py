@@ -165,10 +165,12 @@ def cast_scans(
         t_ok = t.ravel()[flat]
         origin_and_direction = batch.reshape(-1, 6).take(flat, axis=0)
         hits[used : used + len(t_ok)] = origin_and_direction[:, :3] + t_ok[:, None] * origin_and_direction[:, 3:]
+        per_scan = ok.sum(axis=1)
+        ends = np.cumsum(per_scan)[:-1]  # where each scan's points end in the flat arrays
         if risley:  # the range along the ray in the sensor's frame of its time: no motion undone
             measured = (t_ok + noise.ravel()[flat])[:, None] * body.reshape(-1, 3).take(flat, axis=0)
-            clock = times[ray_of] + np.repeat(motion.start[first : first + n], ok.sum(axis=1))  # the flight's
-            stamps += np.split(clock, np.cumsum(ok.sum(axis=1))[:-1])
+            clock = times[ray_of] + np.repeat(motion.start[first : first + n], per_scan)  # the flight's
+            stamps += np.split(clock, ends)
         else:
             measured = (t_ok + noise.ravel()[flat])[:, None] * pattern.take(ray_of, axis=0)
         if not np.isfinite(measured).all():  # the config bounds the noise; this keeps a NaN out of every later stage
@@ -177,7 +179,7 @@ def cast_scans(
                 f"scans {index_ranges(bad)} came out with NaN or infinite points: "
                 f"[sensor] range_noise = {sensor.range_noise:g} m is too large for float32 ranges"
             )
-        scans += np.split(measured.astype(np.float64), np.cumsum(ok.sum(axis=1))[:-1])
+        scans += np.split(measured.astype(np.float64), ends)
         used += len(t_ok)
         if progress is not None:
             progress.update(n)

@@ -251,6 +251,13 @@ def _small_gicp(moving: IcpCloud, fixed: IcpCloud, init, metric, inlier_distance
         rotation_epsilon=tolerance / max(moving.reach, 1.0),
         translation_epsilon=tolerance,
     )
+    return scored_alignment(result, moving, fixed, metric, inlier_distance, source)
+
+
+def scored_alignment(result, moving: IcpCloud, fixed: IcpCloud, metric, inlier_distance, source) -> IcpResult:
+    """A small_gicp ``RegistrationResult`` of ``moving`` onto ``fixed`` as an :class:`IcpResult`: the RMSE of
+    :func:`refine_icp` and the information (``source`` as :func:`_small_gicp` takes it), from one pass over the
+    fixed cloud's k-d tree."""
     transform = np.array(result.T_target_source)
     squared, index = fixed.nearest(transform_points(moving.points, transform))
     paired = squared < inlier_distance**2
