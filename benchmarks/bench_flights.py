@@ -74,7 +74,8 @@ ratio = float(np.mean(est_steps[moving] / true_steps[moving])) if moving.any() e
 print(json.dumps({"scans": len(data), "accepted": m["n_accepted"], "loops": m["n_loop_closures"],
                   "false": m["n_false_loop_closures"], "ate_odo": m["ate_rmse_odometry_m"],
                   "ate": m["ate_rmse_optimized_m"], "rpe": m["rpe_trans_1_m"], "ratio": ratio,
-                  "map": m.get("map_error_median_m"), "trusted": m["trusted"], "ungated": m["n_odometry_ungated"],
+                  "map": m.get("map_error_median_m"), "trusted": m["trusted"],
+                  "shape_trusted": m["shape_trusted"], "ungated": m["n_odometry_ungated"],
                   "problems": m["health"]["problems"], "seconds": seconds, "expected": expected_ate(result),
                   "health": m["health"],
                   "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
@@ -241,10 +242,17 @@ def main() -> None:
         print(
             f"{label:12} {r['scans']:5d} {r['accepted']:5d} {ate:>13} {r['expected']:6.2f} {r['rpe']:6.3f} "
             f"{r['ratio']:6.4f} "
-            f"{r['loops']:5d} ({r['false']}) {r['ungated']:7d} {mapped:>6} {r['trusted']!s:>7} {r['seconds']:6.0f} "
+            f"{r['loops']:5d} ({r['false']}) {r['ungated']:7d} {mapped:>6} {verdict(r):>7} {r['seconds']:6.0f} "
             f"{r['peak_gib']:5.2f}  {problems}",
             flush=True,
         )
+
+
+def verdict(row: dict) -> str:
+    """``yes`` (trusted), ``shape`` (trusted in shape only: the scale unobserved) or ``no``."""
+    if row["trusted"]:
+        return "yes"
+    return "shape" if row.get("shape_trusted") else "no"
 
 
 if __name__ == "__main__":

@@ -28,6 +28,8 @@ import os
 import sys
 from pathlib import Path
 
+from bench_flights import child_result, verdict
+
 HERE = Path(__file__).resolve().parent
 DATA = HERE.parent.parent / "shared" / "data"
 DEVELOP = ("autzen_trim.laz", "forest_bc_1.laz", "urban_toronto.laz", "steep_afghanistan.las")
@@ -67,7 +69,8 @@ moving = true_steps > 0.05
 print(json.dumps({"scans": len(data), "accepted": m["n_accepted"], "loops": m["n_loop_closures"],
                   "false": m["n_false_loop_closures"], "ate_odo": m["ate_rmse_odometry_m"],
                   "ate": m["ate_rmse_optimized_m"], "ratio": float(np.mean(odo_steps[moving] / true_steps[moving])),
-                  "trusted": m["trusted"], "problems": m["health"]["problems"], "seconds": seconds,
+                  "trusted": m["trusted"], "shape_trusted": m["shape_trusted"], "problems": m["health"]["problems"],
+                  "health": m["health"], "seconds": seconds,
                   "peak_gib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20}))
 """
 
@@ -131,7 +134,6 @@ def main() -> None:
     if not DATA.is_dir():
         sys.exit(f"error: {DATA} is not here: the tiles live in ../shared/data beside the checkout")
     sys.path.insert(0, str(HERE))
-    from bench_flights import child_result
 
     tiles = [t if "." in t else next(p.name for p in DATA.glob(f"{t}.*")) for t in args.tiles or DEVELOP + HELD_OUT]
     plan = list(QUICK) if args.quick else [(tile, run) for tile in tiles for run in args.runs]
@@ -154,7 +156,7 @@ def main() -> None:
         problems = " | ".join(p[:50] for p in r["problems"])
         print(
             f"{tile:22} {run:10} {half:8} {r['scans']:5d} {r['ate_odo']:6.2f}->{r['ate']:5.2f} "
-            f"{r['loops']:5d} ({r['false']}) {r['trusted']!s:>7} {r['ratio']:7.4f} {r['seconds']:5.0f}  {problems}",
+            f"{r['loops']:5d} ({r['false']}) {verdict(r):>7} {r['ratio']:7.4f} {r['seconds']:5.0f}  {problems}",
             flush=True,
         )
     print(summary(rows))
@@ -164,13 +166,15 @@ def summary(rows: list[dict]) -> str:
     """One line: runs, failures, and what the ground issue asks of every run."""
     done = [r for r in rows if "failed" not in r]
     trusted_wrong = sum(r["trusted"] and r["ate"] > 1.0 for r in done)
-    good_untrusted = sum((not r["trusted"]) and r["ate"] < 0.5 for r in done)
+    good_untrusted = sum(verdict(r) == "no" and r["ate"] < 0.5 for r in done)
+    good_shape = sum(verdict(r) == "shape" and r["ate"] < 0.5 for r in done)
     biased = sum(abs(r["ratio"] - 1) > 0.005 for r in done)
     worst = max((r["ate"] for r in done), default=float("nan"))
     return (
         f"summary: {len(done)} of {len(rows)} runs flown; worst ATE {worst:.2f} m; "
         f"{sum(r['false'] for r in done)} false loops; {trusted_wrong} trusted above 1 m; "
-        f"{good_untrusted} under 0.5 m untrusted; {biased} with a step ratio off by more than 0.5 %"
+        f"{good_untrusted} under 0.5 m untrusted ({good_shape} more trusted in shape only); "
+        f"{biased} with a step ratio off by more than 0.5 %"
     )
 
 

@@ -9,9 +9,10 @@ import pytest
 
 import helpers
 from helpers.__main__ import ENVIRONMENT, main
-from helpers.cli.terminal import reason_lines, verdict
+from helpers.cli.terminal import reason_lines, report_run, verdict
 from helpers.config.files import config_to_toml, load_config
 from helpers.config.tables import Config, FeaturesConfig, SensorConfig
+from helpers.quality.trust import Health
 
 
 def run(*args):
@@ -271,3 +272,32 @@ def test_the_last_line_of_a_run_says_trusted_or_not():
     assert verdict([]) == "trusted"
     assert verdict(["a."]) == 'not trusted: 1 reason in the warnings above (metrics.json: "trusted": false)'
     assert verdict(["a.", "b."]).startswith("not trusted: 2 reasons")
+
+
+def test_a_run_whose_scale_is_unobserved_is_reported_trusted_in_shape_only(capsys, tmp_path):
+    """Nothing disagrees in the run but its loops do not observe its scale: the reason is one warning on
+    standard error, the last line says trusted in shape only, and an untrusted run says only that."""
+    scale = (
+        "Its scale is not observed: no loop observes the flight's scale. A bias of 1 % in the odometry's step "
+        "lengths would move the trajectory by 2.15 m unseen. Likely cause: every loop closes where the flight "
+        "passed before."
+    )
+    counts = {
+        "n_fallbacks": 0, "n_steps": 10, "n_poor_steps": 0, "n_weak_steps": 0, "n_loops_rejected": 0,
+        "n_loops_too_flat": 0, "n_loops_against_graph": 0, "n_edges_back_left_out": 0, "n_edges_back_tried": 0,
+        "loop_scale_sigma_pct": None, "longest_loop_lever_m": 0.0, "moved_per_scale_pct_m": 2.15,
+    }  # fmt: skip
+    metrics = {"n_accepted": 11, "n_scans": 11, "n_loop_closures": 0, "runtime_s": {"total": 1.0}}
+    report_run(metrics, Health(counts, [], scale), tmp_path)
+    out, err = capsys.readouterr()
+    assert err.splitlines() == [
+        "warning: trusted in shape only: Its scale is not observed: no loop observes the flight's scale.",
+        "  A bias of 1 % in the odometry's step lengths would move the trajectory by 2.15 m unseen.",
+        "  Likely cause: every loop closes where the flight passed before.",
+    ]
+    assert out.splitlines()[-1] == verdict([], scale)
+    assert verdict([], scale).startswith("trusted in shape only: its scale is not observed")
+    report_run(metrics, Health(counts, ["Too many steps fell back."], scale), tmp_path)
+    out, err = capsys.readouterr()
+    assert err.splitlines() == ["warning: not trusted: Too many steps fell back."]
+    assert out.splitlines()[-1].startswith("not trusted: 1 reason")

@@ -74,9 +74,15 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
     )
 
 
-def test_a_straight_well_pinned_run_is_trusted():
+def test_a_straight_well_pinned_run_is_consistent_but_vouches_for_no_scale():
+    """Every step pinned and no loop: nothing disagrees, so the shape is trusted; nothing observes the scale (a
+    bias in every step length would stretch the line unseen), so the run is not trusted whole, and says how far
+    a bias of 1 % would move it."""
     health = assess(_run())
-    assert health.trusted, health.problems
+    assert health.consistent and not health.trusted, health.problems
+    per_pct = health.counts["moved_per_scale_pct_m"]
+    assert health.counts["loop_scale_sigma_pct"] is None and f"by {per_pct:.2f} m unseen" in health.scale
+    assert health.warning().startswith("this result is trusted in shape only. Its scale is not observed")
     assert health.counts["weakest_step_sigma_m"] < WEAK_SIGMA_M
 
 
@@ -87,7 +93,7 @@ def test_steps_loose_along_the_track_are_weak_by_their_information():
     informations = [loose if k % 5 == 0 else _info(0.05) for k in range(NODES - 1)]
     health = assess(_run(informations=informations, constraint=0.5))
     assert health.counts["n_weak_steps"] == len(range(0, NODES - 1, 5))
-    assert not health.trusted and "too flat" in health.warning()
+    assert not health.consistent and "too flat" in health.warning()
     assert health.counts["weakest_step_sigma_m"] > 0.99
 
 
@@ -96,7 +102,7 @@ def test_a_step_on_ground_too_flat_is_weak_whatever_its_information_says():
     Hessian can look sure on a plane, and a step may come without information."""
     for informations in (None, [None] * (NODES - 1)):
         health = assess(_run(informations=informations, constraint=0.001))
-        assert health.counts["n_weak_steps"] == NODES - 1 and not health.trusted
+        assert health.counts["n_weak_steps"] == NODES - 1 and not health.consistent
 
 
 def _out_and_back(fell_back):
@@ -139,7 +145,7 @@ def test_revisits_after_a_blind_stretch_name_it_not_the_loop_settings():
     for health in (in_a_row, scattered):
         c = health.counts
         assert c["n_fallbacks"] == BLIND_RUN_STEPS and c["n_revisits_unclosed"] == c["n_revisits"] >= 3
-        assert not health.trusted and len(health.problems) == 1, health.problems
+        assert not health.consistent and len(health.problems) == 1, health.problems
     assert f"in a row (scans {3 * 11}-{3 * (10 + BLIND_RUN_STEPS)})" in in_a_row.warning()
     assert "--gnss" in in_a_row.warning() and "sub_map_thresh" not in in_a_row.warning()
     assert "sub_map_thresh" in scattered.warning() and "in a row" not in scattered.warning()
@@ -200,7 +206,7 @@ def test_edges_back_moving_the_trajectory_are_no_loop_correction():
     moved = np.abs(run.graph.poses[:, 0, 3] - run.odometry.poses[:, 0, 3]).max()
     assert moved > 1.0
     health = assess(run)
-    assert health.counts["largest_correction_m"] == 0.0 and health.trusted, health.problems
+    assert health.counts["largest_correction_m"] == 0.0 and health.consistent, health.problems
 
 
 def test_a_hovering_flight_has_its_loop_corrections_judged_in_metres():
@@ -213,7 +219,7 @@ def test_a_hovering_flight_has_its_loop_corrections_judged_in_metres():
         health = assess(run)
         assert health.counts["distance_flown_m"] == 0.0
         assert (health.counts["largest_correction_m"] > CORRECTION_FLOOR_M) != trusted
-        assert health.trusted == trusted, health.problems
+        assert health.consistent == trusted, health.problems
         assert trusted or "the flight hovered" in health.warning()
         # hovering drifts by 0.2 m a step: the loop's move is within the steps' sigmas, but the graph expects the
         # nodes between its ends farther off than the bar, and the warning says so
@@ -265,9 +271,9 @@ def test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing():
     0.3 m fix at every node the graph expects its trajectory well within the bar, and says why it may."""
     weak = {"informations": [_info(1.0)] * (NODES - 1), "constraint": 0.0}
     alone = assess(_run(**weak))
-    assert not alone.trusted and alone.counts["expected_ate_m"] is None  # no loop holds them, no graph asked
+    assert not alone.consistent and alone.counts["expected_ate_m"] is None  # no loop holds them, no graph asked
     held = assess(_run(**weak, fixes=_fixes(0.3)))
-    assert held.trusted, held.problems
+    assert held.trusted and not held.scale, held.problems  # the fixes hold its scale too
     # 30 fixes of 0.3 m, each fused with steps of 1 m: each node's sigma is a little under the fix's sqrt(3) 0.3
     assert 0.2 < held.counts["expected_ate_m"] < np.sqrt(3) * 0.3
     assert held.counts["n_weak_steps"] == NODES - 1  # still counted, no longer held against the run
@@ -277,7 +283,7 @@ def test_gnss_fixes_too_loose_for_the_steps_leave_a_run_untrusted():
     """The same weak steps with 3 m fixes: the graph expects metres, and the run says so, naming GNSS."""
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(3.0)))
     assert health.counts["expected_ate_m"] > MAX_EXPECTED_ATE_M
-    assert not health.trusted and len(health.problems) == 1 and "GNSS fixes" in health.problems[0]
+    assert not health.consistent and len(health.problems) == 1 and "GNSS fixes" in health.problems[0]
 
 
 def _held_by_loops(config=CONFIG, loops=()):
@@ -293,7 +299,7 @@ def test_loops_that_hold_the_trajectory_answer_the_drift_rules():
     """The drift rules name every step too flat; the graph, its information calibrated and its loops agreeing
     with it, expects its trajectory within 0.5 m, so the run is trusted and the weak steps only counted."""
     health = assess(_held_by_loops())
-    assert health.trusted, health.problems
+    assert health.trusted, (health.problems, health.scale)  # loops of levers up to 58 m observe the scale too
     assert health.counts["n_weak_steps"] == NODES - 1
     assert 0.0 < health.counts["expected_ate_m"] <= MAX_EXPECTED_ATE_M
     assert health.counts["loop_correction_sigmas"] <= FALSE_LOOP_SIGMAS
@@ -305,13 +311,13 @@ def test_only_a_graph_of_calibrated_information_that_agrees_with_itself_answers_
     edge ends far from it, but the loops moved the trajectory by many times the sigmas of the steps between
     them (about 0.3 m at the last node), and the drift rules stand."""
     fixed = assess(_held_by_loops(config=Config().with_values(pose_graph={"graph_weights": "icp"})))
-    assert not fixed.trusted and "too flat" in fixed.warning()
+    assert not fixed.consistent and "too flat" in fixed.warning()
     assert fixed.counts["expected_ate_m"] is None and fixed.counts["loop_correction_sigmas"] is None
     run = _held_by_loops(config=CONFIG.with_values(pose_graph={"loop_kernel": "none"}), loops=[_loop_off_by(3.0, 0.01)])
     assert max(sigmas for *_, sigmas in loop_residuals(run)) < 15  # the false loop itself ends 2.5 sigmas off
     bent = assess(run)
     assert bent.counts["largest_correction_m"] > 2.5 and bent.counts["loop_correction_sigmas"] > FALSE_LOOP_SIGMAS
-    assert not bent.trusted and "too flat" in bent.warning() and "moved the trajectory" in bent.warning()
+    assert not bent.consistent and "too flat" in bent.warning() and "moved the trajectory" in bent.warning()
     # why the graph did not answer: left out, the false loop (and the true one it pulled off) end metres away
     assert "the graph bent to them" in bent.warning() and "29" in bent.warning()
     assert bent.counts["n_loops_off_the_rest"] == 2 and bent.counts["expected_ate_m"] is None
@@ -347,14 +353,14 @@ def test_loops_that_mend_a_drift_repeated_step_after_step_answer_the_drift_rules
     assert health.counts["largest_correction_m"] > 1.5
     assert health.counts["loop_correction_sigmas"] > FALSE_LOOP_SIGMAS  # what the rule before held against it
     assert health.counts["n_loops_off_the_rest"] == 0
-    assert health.trusted, health.problems
+    assert health.consistent, health.problems
     assert max(metres for metres, *_ in left_out_residuals(mended)) < 0.5
     no_kernel = CONFIG.with_values(pose_graph={"loop_kernel": "none"})
     lone = _drifting(0.08, loop_every=NODES - 1, loop_sigma=0.01, config=no_kernel)
     assert loop_residuals(lone)[0][0] < 0.1 and left_out_residuals(lone)[0][0] > 2.0
     health = assess(lone)
     assert health.counts["n_loops_against_graph"] == 0 and health.counts["n_loops_off_the_rest"] == 1
-    assert not health.trusted and "the graph bent to them" in health.warning()
+    assert not health.consistent and "the graph bent to them" in health.warning()
 
 
 def test_a_loop_left_out_ends_where_the_graph_without_it_puts_it():
@@ -406,7 +412,7 @@ def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch,
 
     monkeypatch.setattr(helpers.quality.trust, measure, fails)
     health = assess(_held_by_loops())
-    assert not health.trusted and "too flat" in health.warning()
+    assert not health.consistent and "too flat" in health.warning()
     assert "its marginals could not be computed (indeterminant linear system)" in health.warning()
     assert health.counts["expected_ate_m"] is None
     if measure != "expected_ate":  # the leave-one-out count is made before the expected ATE is asked
@@ -423,5 +429,5 @@ def test_gnss_fixes_whose_graph_cannot_say_how_sure_it_is_leave_a_run_untrusted(
 
     monkeypatch.setattr(helpers.quality.trust_rules, "expected_ate", fails)
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(0.3)))
-    assert not health.trusted and health.counts["expected_ate_m"] is None
+    assert not health.consistent and health.counts["expected_ate_m"] is None
     assert "could not say how far off" in health.warning() and "indeterminant linear system" in health.warning()

@@ -1,6 +1,8 @@
 """How well a run's loops observe the flight's scale (helpers.quality.graph_checks.scale_sigma and
 loop_scale), on cases whose answer is analytic, and what the trust flag's summary says of it."""
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 from test_health import NODES, _at, _info, _run
@@ -8,6 +10,7 @@ from test_health import NODES, _at, _info, _run
 from helpers.config.tables import Config
 from helpers.quality.graph_checks import loop_scale, scale_sigma
 from helpers.quality.trust import MAX_EXPECTED_ATE_M, Health, assess
+from helpers.quality.trust_rules import scale_unvouched
 from helpers.slam.graph.factors import Edge
 
 CONFIG = Config().with_values(pose_graph={"graph_weights": "hessian"})
@@ -64,7 +67,7 @@ def test_a_run_reports_its_loops_scale_and_what_1_percent_would_move():
     assert c["moved_per_scale_pct_m"] == pytest.approx(reach / 100, abs=1e-3)
     assert c["loop_scale_sigma_pct"] == pytest.approx(100 * sigma, abs=1e-3)
     assert c["loop_scale_sigma_pct"] * c["moved_per_scale_pct_m"] <= MAX_EXPECTED_ATE_M
-    assert "the loops observe the flight's scale" in health.summary()
+    assert "the loops observe the flight's scale" in health.summary() and health.trusted and not health.scale
 
 
 @pytest.mark.parametrize(
@@ -77,8 +80,14 @@ def test_the_summary_vouches_for_scale_only_as_far_as_the_loops_measured_it(sigm
         "loop_scale_sigma_pct": sigma_pct, "longest_loop_lever_m": 0.0 if sigma_pct is None else 48.0,
         "moved_per_scale_pct_m": 1.5,
     }  # fmt: skip
-    summary = Health(counts).summary()
+    scale = scale_unvouched(SimpleNamespace(held=False, counts=counts))
+    health = Health(counts, [], scale)
+    summary = health.summary()
     assert ("the loops observe the flight's scale" in summary) == observed
     assert ("this run vouches for no scale" in summary) == (not observed)
+    assert health.consistent and health.trusted == observed  # the scale alone decides between the two
     if not observed:
-        assert "would move the trajectory by 1.50 m" in summary
+        assert "would move the trajectory by 1.50 m" in summary and "by 1.50 m unseen" in scale
+    held = scale_unvouched(SimpleNamespace(held=True, counts=counts))  # GNSS fixes hold every node, scale too
+    assert held == "" and Health(counts, [], held).trusted
+    assert observed or Health(counts, [], held).summary().endswith("the GNSS fixes hold it")

@@ -129,7 +129,7 @@ def _run_parser(sub) -> argparse.ArgumentParser:
         help="run the whole SLAM pipeline on a simulated flight, or on your own scans (--scans DIR)",
         description="Simulate a flight's scans, or read your own (--scans DIR), and run the whole SLAM pipeline on "
         "them: odometry, loop closures, the pose graph, the map, graded against the truth when there is one. The "
-        "last line says whether the result is trusted.",
+        "last line says whether the result is trusted, in shape only (its scale unobserved) or not at all.",
         epilog=example(EXAMPLES["run"], EXAMPLES["run-scans"]),
     )
     _map_arguments(run)

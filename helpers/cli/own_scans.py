@@ -280,7 +280,8 @@ def scan_metrics(data: ScanDataset, result, health, folder, args) -> dict:
     steps = result.odometry.timings
     metrics = {
         "trusted": health.trusted,
-        "health": {**health.counts, "problems": health.problems},
+        "shape_trusted": health.consistent,
+        "health": {**health.counts, "problems": health.problems, "scale": health.scale},
         "truth": None,
         "n_scans": result.n_scans,
         "n_accepted": len(result.indices),

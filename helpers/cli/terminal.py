@@ -36,19 +36,26 @@ def example(*commands: str) -> str:
     return ("example:\n" if len(commands) == 1 else "examples:\n") + "\n".join(f"  {c}" for c in commands)
 
 
-def reason_lines(problem: str) -> list[str]:
-    """A reason of the trust flag as short lines: what went wrong on a ``warning:`` line of its own, then its
-    likely cause and what to change, a sentence a line, indented under it."""
+def reason_lines(problem: str, heading: str = "not trusted") -> list[str]:
+    """A reason of the trust flag as short lines: what went wrong on a ``warning:`` line of its own (under
+    ``heading``), then its likely cause and what to change, a sentence a line, indented under it."""
     what, *rest = re.split(r"(?<=\.)\s+(?=[A-Z])", problem.strip())
-    return [f"warning: not trusted: {what}", *(f"  {sentence}" for sentence in rest)]
+    return [f"warning: {heading}: {what}", *(f"  {sentence}" for sentence in rest)]
 
 
-def verdict(problems: list[str]) -> str:
-    """A run's last line: whether its result can be trusted (the reasons are the warnings before it)."""
-    if not problems:
-        return "trusted"
-    reasons = f"{len(problems)} reason{'s' if len(problems) > 1 else ''}"
-    return f'not trusted: {reasons} in the warnings above (metrics.json: "trusted": false)'
+def verdict(problems: list[str], scale: str = "") -> str:
+    """A run's last line: whether its result can be trusted (the reasons are the warnings before it), or
+    trusted in shape only, when nothing but its scale is unobserved (``scale``: why, as
+    :class:`helpers.quality.trust.Health` says it)."""
+    if problems:
+        reasons = f"{len(problems)} reason{'s' if len(problems) > 1 else ''}"
+        return f'not trusted: {reasons} in the warnings above (metrics.json: "trusted": false)'
+    if scale:
+        return (
+            "trusted in shape only: its scale is not observed, see the warning above "
+            '(metrics.json: "trusted": false, "shape_trusted": true)'
+        )
+    return "trusted"
 
 
 class StreamError(Exception):
@@ -76,6 +83,8 @@ def report_run(metrics: dict, health, out) -> None:
     The ATE is reported where ``metrics`` has one (a run graded against a truth)."""
     for problem in health.problems:
         print(*reason_lines(problem), sep="\n", file=sys.stderr)
+    if health.scale and not health.problems:  # one verdict at a time: an untrusted run's scale is in its summary
+        print(*reason_lines(health.scale, "trusted in shape only"), sep="\n", file=sys.stderr)
     graded = (
         f" ({metrics['n_false_loop_closures']} false); ATE {metrics['ate_rmse_odometry_m']:.2f} m (odometry) -> "
         f"{metrics['ate_rmse_optimized_m']:.2f} m (optimised)"
@@ -86,6 +95,6 @@ def report_run(metrics: dict, health, out) -> None:
         f"{metrics['n_accepted']} accepted scans of {metrics['n_scans']}, {metrics['n_loop_closures']} loop "
         f"closures{graded}; {metrics['runtime_s']['total']:.0f} s; written to {out}",
         health.summary(),
-        verdict(health.problems),
+        verdict(health.problems, health.scale),
         written=out,
     )

@@ -78,7 +78,8 @@ def run_metrics(dataset, result, map_error: MapError | None = None, health=None)
     steps = result.odometry.timings
     metrics = {
         "trusted": health.trusted,
-        "health": {**health.counts, "problems": health.problems},
+        "shape_trusted": health.consistent,
+        "health": {**health.counts, "problems": health.problems, "scale": health.scale},
         "n_scans": result.n_scans,
         "n_accepted": len(result.indices),
         "n_loop_closures": len(result.loops),

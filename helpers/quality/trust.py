@@ -72,13 +72,15 @@ loops hold the drift those rules saw: it is counted, not held against the
 run. Revisits that closed no loop stay a problem: the graph cannot see a loop
 it was never given.
 
-Whatever the verdict, the summary says how far the loops observe the flight's *scale*
-(:func:`helpers.quality.graph_checks.loop_scale`). A loop that closes where the flight passed before has
-no lever: a lap shrunk by biased step lengths closes on a lap shrunk alike, and the graph cannot see
-it (over canopy the steps come out up to a few per cent short, ``benchmarks/README.md``). Loops between
-neighbouring strips have levers of the strips' spacing and measure it. Unless a scale error of the
-loops' sigma moves the trajectory by at most :data:`MAX_EXPECTED_ATE_M`, the run says it vouches for
-no scale, and how far a bias of 1 % would move the trajectory unseen.
+A run none of these rules names is *consistent*: its steps, loops and graph agree with one another. It
+is *trusted* only if it also observes its *scale* (:func:`helpers.quality.trust_rules.scale_unvouched`).
+A loop that closes where the flight passed before has no lever: a lap shrunk by biased step lengths
+closes on a lap shrunk alike, and every rule above agrees with it (over canopy the steps come out up to
+a few per cent short, ``benchmarks/README.md``). Loops between neighbouring strips have levers of the
+strips' spacing and measure it; GNSS fixes hold it. Unless a scale error of the loops' sigma
+(:func:`helpers.quality.graph_checks.loop_scale`) moves the trajectory by at most
+:data:`MAX_EXPECTED_ATE_M`, a lidar-only run is trusted *in shape only*: it says so, and how far a
+bias of 1 % would move the trajectory unseen, and vouches for no more.
 
 The rules themselves, each a function that returns its problem or nothing,
 and the bars above, are in :mod:`helpers.quality.trust_rules`; :func:`assess` runs
@@ -106,6 +108,7 @@ from helpers.quality.trust_rules import (
     RULES,
     WEAK_SIGMA_M,
     facts_of,
+    scale_unvouched,
 )
 
 __all__ = [
@@ -127,10 +130,17 @@ class Health:
 
     counts: dict  # steps, fallbacks, poor steps, loop queries, loops rejected (too flat), edges back left out, revisits
     problems: list[str] = field(default_factory=list)  # one sentence each: what, likely cause, what to change
+    scale: str = ""  # why the run cannot vouch for its scale ('' when it can): what, likely cause, what to change
+
+    @property
+    def consistent(self) -> bool:
+        """No rule names a problem: the steps, loops and graph agree with one another (the shape is trusted)."""
+        return not self.problems
 
     @property
     def trusted(self) -> bool:
-        return not self.problems
+        """Consistent, and its scale observed: the run vouches for its trajectory whole."""
+        return not self.problems and not self.scale
 
     def summary(self) -> str:
         """One line of counts."""
@@ -171,6 +181,8 @@ class Health:
             else f"the loops barely observe the flight's scale (a sigma of {sigma:.2g} %, levers up to {lever:.0f} m: "
             "a loop that closes where the flight passed before has none)"
         )
+        if not self.scale:  # GNSS fixes hold every node's position, scale included
+            return f"; {seen}: the GNSS fixes hold it"
         return (
             f"; {seen}, so this run vouches for no scale: a bias of 1 % in the odometry's step lengths would move "
             f"the trajectory by {per_pct:.2f} m"
@@ -178,9 +190,9 @@ class Health:
 
     def warning(self) -> str:
         """The plain warning of an untrusted run ('' when trusted)."""
-        if self.trusted:
-            return ""
-        return "this result cannot be trusted: " + " ".join(self.problems)
+        if self.problems:
+            return "this result cannot be trusted: " + " ".join(self.problems)
+        return f"this result is trusted in shape only. {self.scale}" if self.scale else ""
 
 
 def assess(result) -> Health:
@@ -204,7 +216,7 @@ def assess(result) -> Health:
             problems = [problem for k, problem in enumerate(problems) if k not in drift]
         else:  # the last word of the drift rules says why the graph could not answer them
             problems[drift[-1]] += f" The loops do not answer this drift by the graph's own reckoning: {why}."
-    return Health(facts.counts, problems)
+    return Health(facts.counts, problems, scale_unvouched(facts))
 
 
 def graph_answer(result, rebuilt, without, counts: dict) -> tuple[float | None, str]:

@@ -278,6 +278,36 @@ RULES = (
 )
 
 
+SPARSE_CANOPY_BIAS_PCT = 2.0  # %: how short the odometry's steps came out over a sparse forest (forest_bc_1 thinned to
+# 1.5 points per m2, 150 m above it: step ratio 0.980, benchmarks/bench_bias_odometry.py); dense canopy 0.4-1.0 %,
+# roofs and open ground under 0.1 %. Said in the message only: the rule reads what the loops observe, not this.
+
+
+def scale_unvouched(run: Facts) -> str:
+    """Why a lidar-only run cannot vouch for its scale, or '' when it can: the loops observe the scale when an
+    error of the sigma they leave it (:func:`helpers.quality.graph_checks.loop_scale`) moves the trajectory by at
+    most :data:`MAX_EXPECTED_ATE_M`; GNSS fixes hold every node's position, scale included. Not a problem of
+    the run's consistency (the rules of :data:`RULES`): a lap shrunk by biased step lengths closes on a lap
+    shrunk alike, and every rule and loop agrees with it."""
+    counts = run.counts
+    sigma, per_pct = counts["loop_scale_sigma_pct"], counts["moved_per_scale_pct_m"]
+    if run.held or (sigma is not None and sigma * per_pct <= MAX_EXPECTED_ATE_M):
+        return ""
+    seen = (
+        "no loop observes the flight's scale"
+        if sigma is None
+        else f"the loops leave the flight's scale a sigma of {sigma:.2g} %, which moves the trajectory by "
+        f"{sigma * per_pct:.2f} m, more than {MAX_EXPECTED_ATE_M} m"
+    )
+    return (
+        f"Its scale is not observed: {seen}. A bias of 1 % in the odometry's step lengths would move the "
+        f"trajectory by {per_pct:.2f} m unseen (over a sparse forest the steps came out {SPARSE_CANOPY_BIAS_PCT:g} % "
+        "short). Likely cause: every loop closes where the flight passed before, and a lap shrunk alike closes "
+        "on itself. Fly parallel strips whose swaths overlap and a cross line (python -m helpers flight TILE "
+        "--pattern survey), so that loops between strips measure the scale, or add GNSS fixes (run --gnss FILE)."
+    )
+
+
 def weak_sigmas(odometry) -> np.ndarray:
     """(K-1,) sigma (m) of each odometry step along the direction it pins least (nan: no information)."""
     informations = odometry.information or [None] * len(odometry.relative)
