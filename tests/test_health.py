@@ -82,6 +82,7 @@ def test_a_straight_well_pinned_run_is_consistent_but_vouches_for_no_scale():
     assert health.consistent and not health.trusted, health.problems
     per_pct = health.counts["moved_per_scale_pct_m"]
     assert health.counts["loop_scale_sigma_pct"] is None and f"by {per_pct:.2f} m unseen" in health.scale
+    assert "Likely cause: no loop closed" in health.scale
     assert health.warning().startswith("this result is trusted in shape only. Its scale is not observed")
     assert health.counts["weakest_step_sigma_m"] < WEAK_SIGMA_M
 

@@ -80,7 +80,8 @@ def test_the_summary_vouches_for_scale_only_as_far_as_the_loops_measured_it(sigm
         "loop_scale_sigma_pct": sigma_pct, "longest_loop_lever_m": 0.0 if sigma_pct is None else 48.0,
         "moved_per_scale_pct_m": 1.5,
     }  # fmt: skip
-    scale = scale_unvouched(SimpleNamespace(held=False, counts=counts))
+    loops = SimpleNamespace(loops=[] if sigma_pct is None else ["a loop of lever 48 m"])
+    scale = scale_unvouched(SimpleNamespace(held=False, counts=counts, result=loops))
     health = Health(counts, [], scale)
     summary = health.summary()
     assert ("the loops observe the flight's scale" in summary) == observed
@@ -88,6 +89,9 @@ def test_the_summary_vouches_for_scale_only_as_far_as_the_loops_measured_it(sigm
     assert health.consistent and health.trusted == observed  # the scale alone decides between the two
     if not observed:
         assert "would move the trajectory by 1.50 m" in summary and "by 1.50 m unseen" in scale
-    held = scale_unvouched(SimpleNamespace(held=True, counts=counts))  # GNSS fixes hold every node, scale too
+        assert ("no loop closed" in scale) == (sigma_pct is None) != ("levers up to 48 m" in scale)
+    held = scale_unvouched(
+        SimpleNamespace(held=True, counts=counts, result=loops)
+    )  # GNSS fixes hold every node, scale too
     assert held == "" and Health(counts, [], held).trusted
     assert observed or Health(counts, [], held).summary().endswith("the GNSS fixes hold it")

@@ -299,12 +299,18 @@ def scale_unvouched(run: Facts) -> str:
         else f"the loops leave the flight's scale a sigma of {sigma:.2g} %, which moves the trajectory by "
         f"{sigma * per_pct:.2f} m, more than {MAX_EXPECTED_ATE_M} m"
     )
+    cause = (
+        f"every loop closes near where the flight passed before (levers up to {counts['longest_loop_lever_m']:.0f} "
+        "m), and a lap shrunk alike closes on itself"
+        if run.result.loops
+        else "no loop closed, and the steps alone cannot see a bias they share"
+    )
     return (
         f"Its scale is not observed: {seen}. A bias of 1 % in the odometry's step lengths would move the "
         f"trajectory by {per_pct:.2f} m unseen (over a sparse forest the steps came out {SPARSE_CANOPY_BIAS_PCT:g} % "
-        "short). Likely cause: every loop closes where the flight passed before, and a lap shrunk alike closes "
-        "on itself. Fly parallel strips whose swaths overlap and a cross line (python -m helpers flight TILE "
-        "--pattern survey), so that loops between strips measure the scale, or add GNSS fixes (run --gnss FILE)."
+        f"short). Likely cause: {cause}. Fly parallel strips whose swaths overlap and a cross line (python -m "
+        "helpers flight TILE --pattern survey), so that loops between strips measure the scale, or add GNSS "
+        "fixes (run --gnss FILE)."
     )
 
 
