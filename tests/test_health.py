@@ -60,7 +60,7 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
     for fix in fixes:
         graph.add_factor(fix)
     optimised = graph.optimize(anchor_pose=poses[0], loop_kernel=config.pose_graph.loop_kernel)
-    queries = [SimpleNamespace(closure=loop, submap_ids=[0], best_scan_constraint=0.5) for loop in loops]
+    queries = [SimpleNamespace(closure=loop, submap_ids=[0], best_scan_constraint=0.5, fallback="") for loop in loops]
     return SimpleNamespace(
         config=config,
         indices=odometry.indices,
@@ -423,12 +423,12 @@ def test_a_graph_whose_marginals_cannot_be_computed_does_not_answer(monkeypatch,
 def test_gnss_fixes_whose_graph_cannot_say_how_sure_it_is_leave_a_run_untrusted(monkeypatch):
     """The run of test_gnss_fixes_hold_a_run_whose_odometry_pinned_nothing, trusted with 0.3 m fixes, when
     GTSAM cannot give the graph's marginals: not trusted, and the warning says so."""
-    import helpers.quality.trust_rules  # where the run's facts, a GNSS graph's expected ATE among them, are measured
+    import helpers.quality.trust_facts  # where the run's facts, a GNSS graph's expected ATE among them, are measured
 
     def fails(result):
         raise SlamError("indeterminant linear system")
 
-    monkeypatch.setattr(helpers.quality.trust_rules, "expected_ate", fails)
+    monkeypatch.setattr(helpers.quality.trust_facts, "expected_ate", fails)
     health = assess(_run(informations=[_info(1.0)] * (NODES - 1), constraint=0.0, fixes=_fixes(0.3)))
     assert not health.consistent and health.counts["expected_ate_m"] is None
     assert "could not say how far off" in health.warning() and "indeterminant linear system" in health.warning()

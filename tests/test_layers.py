@@ -24,7 +24,12 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / "helpers"
 LAYERS = {"sim": 1, "slam": 2, "quality": 3, "viz": 4, "exercises": 4, "site": 5, "cli": 6, "__main__": 7}
 GRADER = "helpers.quality.evaluation"
-TRUST = ("helpers.quality.trust", "helpers.quality.trust_rules", "helpers.quality.graph_checks")
+TRUST = (
+    "helpers.quality.trust",
+    "helpers.quality.trust_rules",
+    "helpers.quality.trust_facts",
+    "helpers.quality.graph_checks",
+)
 MAX_FLAT_MODULES = 8
 
 

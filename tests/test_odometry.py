@@ -16,6 +16,7 @@ from helpers.slam.odometry import (
     run_odometry,
     staleness,
 )
+from helpers.slam.registration.fallbacks import CHECKS
 from helpers.slam.registration.icp import WEAK_CONSTRAINT
 
 WAYPOINT_ROWS = slice(60, 130)  # a straight stretch and most of a 90-degree turn
@@ -103,6 +104,10 @@ def test_a_scan_too_sparse_to_describe_falls_back_instead_of_crashing(flight):
     assert len(result.poses) == 5 and np.isfinite(result.poses).all()
     assert [index for index, _ in result.fallbacks] == [9, 12]
     assert "robust fit failed" in dict(result.fallbacks)[9]
+    # every fallback named by its check, one per step that fell back (the names a run's health counts)
+    named = [(index, check) for index, check in zip(result.indices[1:], result.checks, strict=True) if check]
+    assert [index for index, _ in named] == [9, 12] and dict(named)[9] == "robust fit failed"
+    assert all(check in CHECKS for _, check in named)
 
 
 def test_odometry_refuses_too_few_scans(flight):
@@ -170,6 +175,7 @@ def test_a_fit_that_pairs_little_of_the_scan_is_retried_from_the_last_motion(fli
     fixed, moving = (frames.describe(prepare(flight.scans[k], config), config) for k in (fixed_id, moving_id))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert ("paired" if not crop else "restarted from the previous motion") in (pair.fallback or ""), pair.fallback
+    assert pair.check == ("little paired" if not crop else "far off, restarted")  # the name a run counts it by
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.3
 
 
@@ -197,7 +203,7 @@ def test_on_a_featureless_plane_a_jump_from_the_last_motion_is_not_believed(flat
     monkeypatch.setattr(fallbacks, "robust_fit", lambda *args, **kwargs: (far, np.zeros(0, bool)))
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth)
-    assert "too flat" in (pair.fallback or ""), pair.fallback
+    assert "too flat" in (pair.fallback or "") and pair.check == "flat ground", pair.fallback
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.5
 
 
@@ -226,7 +232,7 @@ def test_on_repeating_ground_a_fit_one_ridge_off_loses_to_the_last_motion(grid_t
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert pair.constraint > WEAK_CONSTRAINT, pair.constraint  # the ground pins the motion: not the flat case
-    assert "last motion kept" in (pair.fallback or ""), pair.fallback
+    assert "last motion kept" in (pair.fallback or "") and pair.check == "jump", pair.fallback
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.3
 
 
@@ -249,6 +255,7 @@ def test_a_fit_turned_half_round_loses_to_the_last_motion(flat_plane, monkeypatc
     fixed, moving = (frames.describe(prepare(data.scans[k], config), config) for k in (3, 6))
     pair = register_frames(moving, fixed, config, guess=truth @ _nudge(0.5))
     assert "and 180 deg from the last motion" in (pair.fallback or ""), pair.fallback
+    assert pair.check == ("flat ground" if "too flat" in pair.fallback else "jump")  # named as its message says
     assert rotation_angle_deg(np.linalg.inv(truth) @ pair.T_fine) < 1.0
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.6
 
@@ -366,7 +373,7 @@ def test_a_slide_the_overlap_crop_lets_through_loses_to_the_whole_scan(benchmark
     truth = np.linalg.inv(data.poses[88]) @ data.poses[89]
     last_motion = np.linalg.inv(data.poses[87]) @ data.poses[88]
     pair = register_frames(moving, fixed, config, guess=last_motion)
-    assert "whole scan" in (pair.fallback or ""), pair.fallback
+    assert "whole scan" in (pair.fallback or "") and pair.check == "whole scan", pair.fallback
     assert np.linalg.norm(pair.T_fine[:3, 3] - truth[:3, 3]) < 0.5
     assert rotation_angle_deg(np.linalg.inv(truth) @ pair.T_fine) < 0.5
 

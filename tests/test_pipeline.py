@@ -18,6 +18,7 @@ from helpers.quality.evaluation import grade_loops, map_errors, run_metrics
 from helpers.quality.trust import assess
 from helpers.sim.trajectories import read_tum
 from helpers.slam.pipeline import Edge, Slam, build_pose_graph, run_slam
+from helpers.slam.registration.fallbacks import CHECKS
 
 SHORT = Config().with_values(loop_closure=dict(sub_map_thresh=3))  # a short loop has few submaps
 
@@ -128,6 +129,9 @@ def test_flat_map_falls_back_instead_of_crashing(flat_plane):
     # ... and says it cannot be trusted, why, and what to change
     health = assess(result)
     assert not health.consistent and health.counts["n_fallbacks"] == len(result.indices) - 1
+    by_check = health.counts["fallbacks_by_check"]  # each named by the check that made it, and said so
+    assert sum(by_check.values()) == len(result.indices) - 1 and set(by_check) <= set(CHECKS)
+    assert "odometry steps fell back (" + ", ".join(f"{n} {c}" for c, n in by_check.items()) in health.summary()
     assert "fell back" in health.warning() and "skip_frames" in health.warning()
     assert health.counts["n_weak_steps"] == len(result.indices) - 1 and "too flat" in health.warning()
     assert run_metrics(data, result)["trusted"] is False

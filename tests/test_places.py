@@ -7,6 +7,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from helpers.config.tables import Config
+from helpers.quality.trust import assess
 from helpers.slam.loops.places import AGREE_DEG, AGREE_M, CONFIRM_NODES, PlaceRecognition
 
 
@@ -69,6 +70,13 @@ def test_after_a_blind_stretch_the_revisit_a_missed_turn_hid_is_recognised(short
     for loop in grade_loops(short_loop, result):
         assert loop.error_m < 1.0 and loop.error_deg < 2.0
     assert m["ate_rmse_optimized_m"] < 0.5  # the loops bend the blind steps: from some 40 m
+    # the first loop came by recognition (the search at the odometry found none), and the run counts them
+    recognised = [q for q in result.queries if q.fallback == "recognised"]
+    by_recognition = {q.closure.j for q in recognised if q.closure}
+    assert by_recognition and min(by_recognition) == min(loop.j for loop in result.loops)
+    assert m["health"]["n_loops_recognised"] == len(by_recognition)
+    assert m["health"]["n_queries_recognised"] == len(recognised) >= len(result.loops)
+    assert "recognised old places after a blind stretch" in assess(result).summary()
     # without the blind stretch the run never asks: the same odometry, no fallbacks, closes nothing
     seeing = dataclasses.replace(bent, fallbacks=[])
     assert run_metrics(short_loop, run_slam(short_loop, config, odometry=seeing))["n_loop_closures"] == 0

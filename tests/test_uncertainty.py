@@ -510,3 +510,29 @@ def test_too_few_fixes_leave_the_graph_held_at_the_anchor():
     np.testing.assert_allclose(graph.positions([0])[0], odometry[0, :3, 3], atol=1e-6)
     with pytest.raises(SlamError, match="not in the graph"):
         graph.add_fix(len(odometry), truth[0, :3, 3], np.ones(3))
+
+
+def test_a_query_whose_graph_gives_no_gate_searches_the_grown_radius_and_says_so(monkeypatch):
+    # GTSAM cannot give the covariances (an indeterminant graph): never a crash, the query searches the radius
+    # grown with the distance flown, as search = "growth" would, and names that fallback; the run counts it.
+    from helpers.config.tables import Config
+    from helpers.errors import SlamError
+    from helpers.slam.loops.closer import LoopCloser
+
+    settings = Config().with_values(loop_closure={"sub_map_thresh": 2, "skip_after_loop": 0})
+
+    def queries(failing):
+        closer = LoopCloser(settings.loop_closure, settings.map, AlwaysMatches(), settings.pose_graph)
+        if failing:
+
+            def indeterminant(*args):
+                raise SlamError("the graph is indeterminant")
+
+            monkeypatch.setattr(closer, "_uncertain_centres", indeterminant)
+        closed, _ = hairpin(closer)
+        return closer.queries, closed
+
+    gated, closed_gated = queries(False)
+    grown, closed_grown = queries(True)
+    assert {q.fallback for q in gated} == {""} and {q.fallback for q in grown} == {"grown radius"}
+    assert closed_gated and closed_grown  # the way back closes loops either way

@@ -146,7 +146,8 @@ class Health:
         """One line of counts."""
         c = self.counts
         return (
-            f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back, {c['n_poor_steps']} kept a poor ICP fit, "
+            f"{c['n_fallbacks']} of {c['n_steps']} odometry steps fell back{self._by_check()}, "
+            f"{c['n_poor_steps']} kept a poor ICP fit, "
             f"{c['n_weak_steps']} lay on ground too flat to pin them; "
             f"{c['n_loops_rejected']} loop candidates rejected ({c['n_loops_too_flat']} on ground too flat), "
             f"{c['n_loops_against_graph']} loop edges against the graph"
@@ -163,9 +164,24 @@ class Health:
                 if not c.get("n_loops_off_the_rest")
                 else f"; {c['n_loops_off_the_rest']} loop edges far from the graph without them"
             )
+            + self._loop_fallbacks()
             + ("" if c.get("expected_ate_m") is None else f"; the graph expects an ATE of {c['expected_ate_m']:.2f} m")
             + self._scale()
         )
+
+    def _by_check(self) -> str:
+        """The fallbacks by the check that made them (:data:`helpers.slam.registration.fallbacks.CHECKS`)."""
+        checks = self.counts.get("fallbacks_by_check") or {}
+        return f" ({', '.join(f'{n} {check}' for check, n in checks.items())})" if checks else ""
+
+    def _loop_fallbacks(self) -> str:
+        """The loop queries that searched another way than the graph's gate, when there were any."""
+        c = self.counts
+        grown, recognised = c.get("n_queries_grown_radius", 0), c.get("n_queries_recognised", 0)
+        said = [f"{grown} loop queries searched the grown radius (no gate from the graph)"] if grown else []
+        if recognised:
+            said.append(f"{recognised} recognised old places after a blind stretch ({c['n_loops_recognised']} closed)")
+        return "".join(f"; {words}" for words in said)
 
     def _scale(self) -> str:
         """What the loops say of the flight's scale (:func:`helpers.quality.graph_checks.loop_scale`): observed

@@ -60,6 +60,7 @@ class OdometryResult:
     rmse: np.ndarray  # (K-1,) m, ICP's point-to-point RMSE per step
     timings: dict[str, np.ndarray]  # ms per stage and accepted scan, (K,) each; step 0 has no match/msac/icp
     fallbacks: list[tuple[int, str]] = field(default_factory=list)  # (scan index, reason)
+    checks: list = field(default_factory=list)  # (K-1,) the check that replaced each step's answer, or None
     tracked: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))  # (K-1,) steps tracked without features
     constraint: np.ndarray = field(
         default_factory=lambda: np.zeros(0)
@@ -161,6 +162,7 @@ class Odometry:
             rmse=np.array([p.rmse for p in pairs], dtype=float),
             timings={stage: np.array([t[stage] for t in self._timings]) for stage in STAGES},
             fallbacks=list(self.fallbacks),
+            checks=[p.check for p in pairs],
             tracked=np.array([p.tracked for p in pairs], dtype=bool),
             constraint=np.array([p.constraint for p in pairs], dtype=float),
             information=[p.information for p in pairs],

@@ -87,6 +87,7 @@ class LoopQuery:
     best_scan_rmse: float  # surface RMSE of the best scan-to-scan match (inf if no submap matched)
     closure: Edge | None  # the accepted loop edge, if any
     best_scan_constraint: float = float("nan")  # how well that match pins the motion (icp.pairing; nan: not measured)
+    fallback: str = ""  # "grown radius": the graph could not give the gate; "recognised": by the descriptors
 
 
 class LoopCloser:
@@ -172,6 +173,7 @@ class LoopCloser:
         submaps, settings = self.submaps, self.settings
         # 1. Old submaps within the search radius (grown, or from the graph's uncertainty), verified by ICP.
         covariances, centres, extents, starts = None, submaps.centres, None, None
+        fallback = ""
         self._follow(node, poses)
         if self.uncertainty is not None:
             try:
@@ -179,6 +181,7 @@ class LoopCloser:
             except SlamError as exc:  # never a crash: this query searches the grown radius instead
                 log.warning("scan %d: %s; searching the grown radius instead", node, exc)
                 covariances, centres, extents, starts = None, submaps.centres, None, None
+                fallback = "grown radius"
         candidates = find_loop_candidates(
             submaps.points,
             centres,
@@ -212,6 +215,7 @@ class LoopCloser:
             recognised = self._recognised(node, cloud, pose, clouds, poses, candidates.radius)
             if recognised is not None:
                 candidates, (closure, best, pinned) = recognised
+                fallback = "recognised"
         if not len(candidates.tried_ids):
             return None
         if closure is not None:
@@ -228,6 +232,7 @@ class LoopCloser:
             best_scan_rmse=best,
             closure=closure,
             best_scan_constraint=pinned,
+            fallback=fallback,
         )
 
     def _best_scan(self, node: int, cloud: np.ndarray, candidates: LoopCandidates, clouds, poses):

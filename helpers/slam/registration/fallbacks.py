@@ -1,7 +1,8 @@
 """The steps of one pair's registration after its matches: the robust fit, ICP from it, and the checks
 that may replace that answer by ICP from the flight's last motion (:func:`~.pair.register_frames` runs
-them in order). Each check that replaces the answer says why in ``fallback``:
-a drone does not jump or spin between scans, and flat or repeating ground matches itself metres away.
+them in order). Each check that replaces the answer says why in ``fallback`` and names itself in
+``check`` (one of :data:`CHECKS`, which a run counts): a drone does not jump or spin between scans, and
+flat or repeating ground matches itself metres away.
 """
 
 from __future__ import annotations
@@ -18,6 +19,19 @@ from helpers.slam.registration.icp import WEAK_CONSTRAINT, pairing
 from helpers.slam.registration.overlap import overlap_icp
 from helpers.slam.registration.robust_fit import robust_fit
 
+# The checks that may replace a pair's answer, by the names a run counts them under (``Health.counts``,
+# ``fallbacks_by_check``); "far off, kept" replaces nothing (ICP from the last motion fitted worse), and is
+# counted with the fallbacks all the same.
+CHECKS = (
+    "robust fit failed",
+    "far off, restarted",
+    "far off, kept",
+    "little paired",
+    "flat ground",
+    "jump",
+    "whole scan",
+)
+
 
 class Refinement:
     """One pair's answer as the steps of :func:`_register` revise it: ``T_coarse`` (the fit, or the guess it was
@@ -29,7 +43,7 @@ class Refinement:
         self.momentum = guess is not None  # a last motion to fall back on (not the first step's identity)
         self.guess = np.eye(4) if guess is None else guess
         self.crop_at = self.guess if self.momentum else None  # the overlap is cut where the last motion puts it
-        self.fallback = None
+        self.fallback = self.check = None
 
     def fit(self, matches: np.ndarray) -> np.ndarray:
         """The robust fit; returns its inliers (none when it failed and ICP starts from the guess)."""
@@ -42,6 +56,7 @@ class Refinement:
                 self.guess,
                 f"robust fit failed ({exc}); ICP started from the previous motion",
             )
+            self.check = "robust fit failed"
         return inliers
 
     def refine(self) -> None:
@@ -72,8 +87,10 @@ class Refinement:
             if rmse_retry < rmse:
                 self.T_fine, self.rmse, self.T_coarse, self.refined = T_retry, rmse_retry, self.guess, retry
                 self.fallback += f"restarted from the previous motion (RMSE {rmse_retry:.2f} m)"
+                self.check = "far off, restarted"
             else:
                 self.fallback += f"kept (from the previous motion RMSE was {rmse_retry:.2f} m)"
+                self.check = "far off, kept"
         self.paired, self.constraint = self.paired_and_constraint(self.T_fine)
 
     def restart_if_little_paired(self) -> None:
@@ -87,6 +104,7 @@ class Refinement:
                     f"ICP from the robust fit paired {paired:.0%} of the points; restarted from the previous "
                     f"motion, which paired {paired_retry:.0%}"
                 )
+                self.check = "little paired"
                 self.refined, self.T_coarse, self.constraint = retry, self.guess, constraint_retry
                 self.T_fine, self.rmse = retry
 
@@ -114,6 +132,7 @@ class Refinement:
                 f"{rmse:.2f} against {retry[1]:.2f} m, {paired:.0%} against {paired_retry:.0%} of the points "
                 "paired); ICP from the last motion kept"
             )
+            self.check = "flat ground" if weak else "jump"
             self.refined, self.constraint = retry, constraint_retry
             self.T_coarse, (self.T_fine, self.rmse) = self.guess, self.refined
 
@@ -131,6 +150,7 @@ class Refinement:
                     f"the fit ended {slide:.1f} m from the last motion and stayed; ICP on the whole scan from the "
                     f"last motion lands within the jump limits (RMSE {uncropped[1]:.2f} m) and is kept"
                 )
+                self.check = "whole scan"
                 self.refined, self.T_coarse, (self.T_fine, self.rmse) = uncropped, self.guess, uncropped
                 self.constraint = self.paired_and_constraint(self.T_fine)[1]
 

@@ -50,6 +50,7 @@ class PairRegistration:
     rmse: float  # m, ICP inlier RMSE
     timings: dict  # ms per stage
     fallback: str | None = None  # why the robust fit or ICP was replaced, if it was
+    check: str | None = None  # the check that replaced it (one of helpers.slam.registration.fallbacks.CHECKS)
     tracked: bool = False  # True: ICP from the last motion alone, no features (tracking mode)
     constraint: float = float("nan")  # how well ICP's pairs pin the translation (helpers.slam.registration.icp.pairing)
     information: np.ndarray | None = None  # 6 x 6 of T_fine, translation first, as the ICP service calibrates it
@@ -181,6 +182,7 @@ def _register(moving: Frame, fixed: Frame, config: Config, guess, icp, stale: in
         pair.rmse,
         timings,
         pair.fallback,
+        check=pair.check,
         constraint=pair.constraint,
         information=pair.refined.information,
     )
