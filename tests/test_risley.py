@@ -54,6 +54,17 @@ def test_every_ray_lies_within_the_field_of_view_and_reaches_its_edge():
         assert angles.min() < 1.0  # ... and pass the nadir
 
 
+def test_a_survey_plans_its_strips_on_the_swath_the_rosette_covers():
+    """The width across the track that a Risley scan's rays reach on flat ground 100 m below is the swath a
+    survey spaces its strips by (helpers.sim.flight_plan.swath_width), not the fan's."""
+    from helpers.sim.flight_plan import swath_width
+
+    rays = risley_directions(RISLEY, np.array([0.0])).reshape(-1, 3)
+    across = 100.0 * rays[:, 1] / np.abs(rays[:, 2])  # where each ray meets the ground, across the track
+    assert swath_width(100.0, RISLEY) == pytest.approx(across.max() - across.min(), rel=0.01)
+    assert swath_width(100.0, RISLEY) != pytest.approx(swath_width(100.0, SensorConfig()), rel=0.1)
+
+
 def test_a_scan_holds_rate_times_period_points_that_fill_the_field():
     assert len(ray_pattern(RISLEY)) == RISLEY.rays_per_scan == 100_000 * 0.1
     avia = SensorConfig(pattern="risley", point_rate=240_000.0, scan_period=0.125)

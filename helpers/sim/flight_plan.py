@@ -31,8 +31,12 @@ MIN_STRIPS = 2  # a survey needs neighbours to overlap
 
 
 def swath_width(height: float, sensor: SensorConfig) -> float:
-    """Metres across the track the lidar's fan covers from ``height`` m above flat ground."""
-    widest = np.radians(max(abs(sensor.azimuth[0]), abs(sensor.azimuth[1])))
+    """Metres across the track the lidar covers from ``height`` m above flat ground: the fan's widest azimuth
+    either side, or the Risley rosette's circular field of view (its full cone angle)."""
+    if sensor.pattern == "risley":
+        widest = np.radians(sensor.field_of_view / 2.0)
+    else:
+        widest = np.radians(max(abs(sensor.azimuth[0]), abs(sensor.azimuth[1])))
     return 2.0 * height * float(np.tan(widest))
 
 
