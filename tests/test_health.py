@@ -71,6 +71,7 @@ def _run(step=2.0, informations=None, extra=(), loops=(), constraint=0.5, config
         extra_edges=list(extra),
         edges_back_tried=len(extra),
         gnss_factors=list(fixes),
+        empty_scans=[],
     )
 
 
@@ -132,7 +133,7 @@ def _out_and_back(fell_back):
     graph = build_pose_graph(odometry, [], [], CONFIG).optimize(anchor_pose=poses[0])
     return SimpleNamespace(
         config=CONFIG, indices=indices, odometry=odometry, graph=graph, loops=[], queries=[], extra_edges=[],
-        edges_back_tried=0, gnss_factors=[],
+        edges_back_tried=0, gnss_factors=[], empty_scans=[],
     )  # fmt: skip
 
 

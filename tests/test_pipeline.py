@@ -14,6 +14,7 @@ import helpers
 from helpers.cli.outputs import write_run
 from helpers.config.files import config_to_dict, config_to_toml
 from helpers.config.tables import Config
+from helpers.errors import SlamError
 from helpers.quality.evaluation import grade_loops, map_errors, run_metrics
 from helpers.quality.trust import assess
 from helpers.sim.trajectories import read_tum
@@ -314,3 +315,22 @@ def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flig
     with pytest.raises(helpers.SlamError) as in_place:
         Slam(Config(), anchor=flight.poses[0]).process(broken.scans[6], 6)
     assert str(raised.value) == str(in_place.value)
+
+
+def test_a_scan_that_holds_no_point_is_left_out_and_spanned(short_loop, short_run):
+    """A scan cast entirely over water holds no point: the run records it, leaves it out, registers the next
+    scan across the gap (its guess the last motion twice), and ends as close to the truth as without the gap;
+    the first scan, which anchors the flight, must hold points (one error, no crash)."""
+    gap = int(short_run.indices[20])  # an accepted scan in the middle of the loop
+    scans = list(short_loop.scans)
+    scans[gap] = np.zeros((0, 3), dtype=np.float32)
+    holed = dataclasses.replace(short_loop, scans=scans)
+    result = run_slam(holed, SHORT)
+    assert result.empty_scans == [gap] and gap not in result.indices
+    assert len(result.indices) == len(short_run.indices) - 1
+    m = run_metrics(holed, result)
+    assert m["health"]["n_scans_empty"] == 1 and m["n_false_loop_closures"] == 0
+    assert m["ate_rmse_optimized_m"] < max(0.3, 2 * run_metrics(short_loop, short_run)["ate_rmse_optimized_m"])
+    scans[0] = np.zeros((0, 3), dtype=np.float32)
+    with pytest.raises(SlamError, match="scan 0, the first, holds no point"):
+        run_slam(dataclasses.replace(short_loop, scans=scans), SHORT)

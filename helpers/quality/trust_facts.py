@@ -92,6 +92,7 @@ def facts_of(result) -> Facts:
     scale, reach, lever = loop_scale(result)  # a scale error of 1 % moves the nodes by reach / 100 (RMS)
     counts = {
         "n_steps": steps,
+        "n_scans_empty": len(result.empty_scans),  # held no point: left out, spanned by the next step
         "n_fallbacks": len(fallbacks),
         "fallbacks_by_check": dict(Counter(check for check in odometry.checks if check)),  # fallbacks.CHECKS
         "n_steps_ungated": int(np.sum(odometry.ungated)),  # gated matches that fell back, matched again ungated

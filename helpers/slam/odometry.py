@@ -24,6 +24,7 @@ from helpers.config.tables import Config
 from helpers.errors import SlamError
 from helpers.geometry import check_pose, transform_points
 from helpers.progress import progress_bar
+from helpers.slam.deskew import per_period
 from helpers.slam.motion_guard import beyond, offset
 from helpers.slam.preprocess import Frame, describe, prepare, prepare_scan, reads_ahead
 from helpers.slam.registration.features import grid_average
@@ -113,6 +114,9 @@ class Odometry:
             motion, stale = predicted_motion(self.relative, self.blind, self.jumped), staleness(self.blind)
         else:  # the reference's: the last step
             motion = self.relative[-1] if self.relative else None
+        steps = (index - self.indices[-1]) / config.registration.skip_frames if self.indices else 1.0
+        if motion is not None and steps > 1:  # scans left out (they held no point): the guess spans them too
+            motion = per_period(motion, 1.0 / steps)
         timings, pair = dict.fromkeys(STAGES, 0.0), None
         timings["icp"] += mapped_ms  # the local map is made for ICP
         if previous is not None:
@@ -264,12 +268,19 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
     odometry = Odometry(config, first_pose)
     bar = progress_bar(len(indices), "odometry", enabled=progress)
 
-    def read_and_prepare(index: int) -> Frame:
+    def read_and_prepare(index: int) -> Frame | None:
         return prepare_scan(scans[index], index, config)
+
+    def take(frame: Frame | None, index: int) -> None:
+        if frame is not None:
+            odometry.register(frame, index)
+        elif index == indices[0]:
+            raise SlamError(f"scan {index}, the first, holds no point: the flight must begin over ground it sees")
+        # else: a scan that holds no point is left out, and the next step spans it (as Slam does)
 
     if not reads_ahead(config):
         for index in indices:
-            odometry.register(read_and_prepare(index), index)
+            take(read_and_prepare(index), index)
             bar.update(1)
     else:  # each scan read and prepared in a thread while the one before is registered (as run_slam does)
         with ThreadPoolExecutor(max_workers=1, thread_name_prefix="helpers-read-ahead") as ahead:
@@ -278,7 +289,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
                 frame = upcoming.result()
                 if k + 1 < len(indices):
                     upcoming = ahead.submit(read_and_prepare, indices[k + 1])
-                odometry.register(frame, index)
+                take(frame, index)
                 bar.update(1)
     bar.close()
     return odometry.result()

@@ -58,8 +58,11 @@ def prepare(scan: np.ndarray, config: Config) -> Frame:
     return frame if registration.mode == "tracking" else describe(frame, config)
 
 
-def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame:
-    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`prepare`)."""
+def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame | None:
+    """Scan ``index`` (sensor frame, (N, 3)) checked and made ready for every stage (:func:`prepare`); None
+    for a scan that holds no point (cast entirely over water, or a dropout), which has nothing to register."""
+    if scan is not None and len(scan) == 0:
+        return None
     return prepare(check_points(scan, f"scan {index}"), config)
 
 

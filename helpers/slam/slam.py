@@ -94,6 +94,7 @@ class SlamResult:
     gnss_factors: list = field(
         default_factory=list
     )  # GNSS fixes in the graph (helpers.slam.graph.factors.PositionFactor)
+    empty_scans: list = field(default_factory=list)  # scans that held no point, left out (the next spans them)
 
     @property
     def loops(self) -> list[Edge]:
@@ -149,6 +150,7 @@ class Slam:
         self.indices: list[int] = []
         self._starts: list[float] = []  # the first point's time of the last two accepted scans with times
         self.runtime = dict.fromkeys(("odometry", "submaps_and_loop_closure", "edges_back"), 0.0)
+        self.empty: list[int] = []  # scans that held no point, left out
 
     def accepts(self, index: int) -> bool:
         """Whether scan ``index`` becomes a node: every ``skip_frames``-th (or the given odometry's)."""
@@ -196,6 +198,10 @@ class Slam:
         node = len(self.indices)
         # 1. Odometry: register the scan onto the previous accepted one (prepared once, for every stage).
         with self._timed("odometry"):
+            if self.given is None:
+                prepared = prepared.result() if prepared is not None else prepare_scan(scan, index, self.config)
+                if prepared is None:  # a scan that holds no point: left out, the next step spans it
+                    return self._left_out(index)
             frame, cloud, fallback, information = self._register(scan, index, prepared)
             self.clouds.append(cloud)
             self.indices.append(int(index))
@@ -213,13 +219,21 @@ class Slam:
             edges = self._add_edges_back(node, relative)
         return Step(index, True, node, poses[node], fallback, query, tuple(collected if self._background else edges))
 
-    def _register(self, scan, index: int, prepared: Future | None):
-        """The odometry step: ``(frame, cloud, fallback, information)``. With a given odometry nothing is
-        registered: the scan is only downsampled on the ICP grid (``frame``, ``fallback`` and ``information``
-        are then None)."""
+    def _left_out(self, index: int) -> Step:
+        """Scan ``index`` held no point: recorded, and the odometry's next step spans it (its guess the last
+        motion for each scan left out); the first scan anchors the flight, and must hold points."""
+        if not self.indices:
+            raise SlamError(f"scan {index}, the first, holds no point: the flight must begin over ground it sees")
+        self.empty.append(int(index))
+        log.warning("scan %d holds no point: left out, the next step spans it", index)
+        return Step(index, accepted=False)
+
+    def _register(self, scan, index: int, frame):
+        """The odometry step: ``(frame, cloud, fallback, information)`` of ``frame``, the scan prepared
+        (:func:`prepare_scan`). With a given odometry nothing is registered: the scan is only downsampled on the
+        ICP grid (``frame``, ``fallback`` and ``information`` are then None)."""
         if self.given is not None:
             return None, grid_average(check_points(scan, f"scan {index}"), self.config.icp_grid), None, None
-        frame = prepared.result() if prepared is not None else prepare_scan(scan, index, self.config)
         pair = self.odometry.register(frame, index)
         self.icp.keep(frame.icp_points, frame.icp)
         if pair is None:
@@ -308,4 +322,5 @@ class Slam:
             runtime_s=runtime,
             edges_back_tried=self.edges_back.tried,
             gnss_factors=list(fixes),
+            empty_scans=list(self.empty),
         )
