@@ -308,7 +308,8 @@ def test_run_slam_prepares_the_next_scan_in_a_thread_and_stops_at_a_bad_one(flig
     tracking = run_slam(flight, Config().with_values(registration={"mode": "tracking"}))
     assert read == [] and processed == tracking.indices.tolist() == [0, 3, 6, 9]  # each prepared in turn
     processed.clear()
-    broken = dataclasses.replace(flight, scans=[*flight.scans[:6], np.zeros((0, 3)), *flight.scans[7:]])
+    nan = np.full((50, 3), np.nan)  # a scan that cannot be used (an empty one is left out and spanned, below)
+    broken = dataclasses.replace(flight, scans=[*flight.scans[:6], nan, *flight.scans[7:]])
     with pytest.raises(helpers.SlamError, match="scan 6") as raised:
         run_slam(broken)
     assert processed == [0, 3, 6]
