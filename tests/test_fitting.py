@@ -136,3 +136,16 @@ def test_a_run_with_gnss_weighs_its_edges_by_their_information(default_dataset):
     keep = {("registration", "icp_local_map"), ("pose_graph", "edges_back")}
     assert fit_to_flight(low, scan_to_scan, keep=keep, gnss=True)[0].pose_graph.graph_weights == "icp"
     assert fit_to_flight(low, Config(), gnss=True) == fit_to_flight(low, Config())
+
+
+def test_a_simulated_risley_flight_gives_the_motion_factor_its_own_speed():
+    """A Risley flight is simulated on a clock ([sensor] speed): the motion factor, which turns a step into
+    its time by the drone's speed, gets that speed, unless the user set one; a fan flight keeps the default."""
+    flight = Flight(height=100.0, spacing=2.0, surface_cell=1.0, strip=20.0)
+    risley = Config().with_values(sensor={"pattern": "risley", "speed": 6.0})
+    fitted, reasons = fit_to_flight(flight, risley)
+    assert fitted.pose_graph.motion_speed == 6.0 and any("motion_speed = 6.0" in r for r in reasons)
+    kept, _ = fit_to_flight(flight, risley, keep={("pose_graph", "motion_speed")})
+    assert kept.pose_graph.motion_speed == Config().pose_graph.motion_speed
+    fan, _ = fit_to_flight(flight, Config().with_values(sensor={"speed": 6.0}))
+    assert fan.pose_graph.motion_speed == Config().pose_graph.motion_speed

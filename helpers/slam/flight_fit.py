@@ -178,6 +178,11 @@ def fit_to_flight(flight: Flight, config: Config, keep=frozenset(), gnss: bool =
             "GNSS fixes are absolute, and against them the edges' sigmas count at their size: each edge is "
             "weighed by its registration's calibrated information (the fixed sigmas let the fixes bend the path)",
         )
+    if config.sensor.pattern == "risley":  # a simulated Risley flight runs on a clock: its speed is known
+        wanted[("pose_graph", "motion_speed")] = (
+            config.sensor.speed,
+            "the simulated flight's own speed ([sensor] speed): the motion factor turns a step into its time",
+        )
     changes, reasons = {}, []
     for (table, key), (value, why) in wanted.items():
         if (table, key) in keep:
