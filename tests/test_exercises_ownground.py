@@ -118,3 +118,24 @@ def test_sigmas_off(capsys):
     for node, value in ((None, 3.0), (2, None), (3, 3.0), (2, 2.0)):
         ex.check_sigmas_off(node, value, truth, poses, sigmas)
         assert said(capsys) == "not yet"
+
+
+def test_lever_sigma(capsys):
+    """A circle of 150 m flown twice, 100 scans a lap; twenty loops from the second lap to the scan five ahead on
+    the first: each lever is the chord 2 r sin(pi 5 / 100), and edges known to 5 cm see the scale to
+    0.05 / (chord sqrt(20))."""
+    angle = np.linspace(0.0, 2 * np.pi, 100, endpoint=False)
+    lap = np.tile(np.eye(4), (200, 1, 1))
+    lap[:, :2, 3] = np.vstack([150.0 * np.c_[np.cos(angle), np.sin(angle)]] * 2)
+    information = np.diag([1 / 0.05**2] * 3 + [1 / np.radians(0.1) ** 2] * 3)
+    chord = 2 * 150.0 * np.sin(np.pi * 5 / 100)
+    expected = 0.05 / (chord * np.sqrt(20))
+    ex.check_lever_sigma(expected, lap, information)
+    assert said(capsys) == "correct"
+    ex.check_lever_sigma(100 * expected, lap, information)
+    assert "per cent" in capsys.readouterr().out
+    ex.check_lever_sigma(float("inf"), lap, information)
+    assert "under it" in capsys.readouterr().out
+    for value in (None, 2 * expected, 0.05 / chord):  # one loop's sigma, not twenty's
+        ex.check_lever_sigma(value, lap, information)
+        assert said(capsys) == "not yet"

@@ -9,6 +9,8 @@
   few nodes only, recomputed here with GTSAM.
 * :func:`check_sigmas_off`: the node farthest from the truth in its own
   position sigmas, and by how many.
+* :func:`check_lever_sigma`: the scale's sigma that loops along the track, a
+  few scans apart, see on a lap flown twice.
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import gtsam
 import numpy as np
 
 from helpers.exercises.report import say, unanswered
+from helpers.quality.graph_checks import scale_sigma
 from helpers.quality.metrics import ate
 
 NO_ANSWER = "fill in the cell and run it again (a hint is folded under the exercise)"
@@ -145,3 +148,31 @@ def check_sigmas_off(node, sigmas_off, truth, poses, sigmas) -> None:
     if int(node) != expected_node or not np.isclose(float(sigmas_off), expected, rtol=0.02):
         return say(False, "", "divide each node's distance from the truth by its sigma, and take the largest")
     say(True, "independent errors would rarely leave a node more than two or three of its sigmas off", "")
+
+
+def ahead_pairs(per_lap: int, ahead: int = 5, every: int = 5) -> list[tuple[int, int]]:
+    """Loop edges of a lap flown twice (``per_lap`` scans a lap): every ``every``-th scan of the second lap
+    joined to the first lap's scan ``ahead`` scans further along."""
+    return [(k + per_lap, (k + ahead) % per_lap) for k in range(0, per_lap, every)]
+
+
+def check_lever_sigma(sigma, lap, loop_information) -> None:
+    """Exercise 8.5: ``sigma``, the scale's sigma (a share of 1) that the loops of :func:`ahead_pairs` see on
+    ``lap`` ((2 n, 4, 4) poses, a lap flown twice), each edge with the 6 x 6 ``loop_information``."""
+    if unanswered(sigma):
+        return say(False, "", NO_ANSWER)
+    pairs = ahead_pairs(len(lap) // 2)
+    expected, lever = scale_sigma(np.asarray(lap, dtype=float), pairs, [loop_information] * len(pairs))
+    value = float(sigma)
+    if not np.isfinite(value):
+        return say(False, "", "those loops still join a scan to the one under it: join it to the scan five ahead")
+    if np.isclose(value, 100 * expected, rtol=0.02):
+        return say(False, "", "that is a per cent: give the sigma as a share of 1")
+    if not np.isclose(value, expected, rtol=0.02):
+        return say(False, "", "not the sigma of these loops: each sees the scale through its lever (scale_sigma)")
+    say(
+        True,
+        f"levers of {lever:.0f} m see the scale about as well as the strips' 48 m: the information does not ask "
+        "which way a lever points",
+        "",
+    )
