@@ -99,17 +99,8 @@ from helpers.quality.graph_checks import (
     loop_pull,
     loops_off_the_rest,
 )
-from helpers.quality.trust_rules import (
-    BLIND_RUN_STEPS,
-    CORRECTION_FLOOR_M,
-    MAX_CORRECTION_SHARE,
-    MAX_EXPECTED_ATE_M,
-    MAX_FALLBACK_SHARE,
-    RULES,
-    WEAK_SIGMA_M,
-    facts_of,
-    scale_unvouched,
-)
+from helpers.quality.trust_facts import CORRECTION_FLOOR_M, MAX_CORRECTION_SHARE, WEAK_SIGMA_M, facts_of
+from helpers.quality.trust_rules import BLIND_RUN_STEPS, MAX_EXPECTED_ATE_M, MAX_FALLBACK_SHARE, RULES, scale_unvouched
 
 __all__ = [
     "BLIND_RUN_STEPS",

@@ -14,28 +14,8 @@ from __future__ import annotations
 import numpy as np
 
 from helpers.quality.graph_checks import FALSE_LOOP_SIGMAS
-from helpers.quality.trust_facts import (
-    CORRECTION_FLOOR_M,
-    MAX_CORRECTION_SHARE,
-    WEAK_SIGMA_M,
-    Facts,
-    facts_of,
-)
+from helpers.quality.trust_facts import Facts
 from helpers.slam.loops.places import BLIND_RUN_STEPS
-
-__all__ = [
-    "BLIND_RUN_STEPS",
-    "CORRECTION_FLOOR_M",
-    "MAX_CORRECTION_SHARE",
-    "MAX_EXPECTED_ATE_M",
-    "MAX_FALLBACK_SHARE",
-    "RULES",
-    "WEAK_SIGMA_M",
-    "Facts",
-    "facts_of",
-    "runs_of",
-    "scale_unvouched",
-]
 
 MAX_FALLBACK_SHARE = 0.10  # more odometry steps than this falling back: the trajectory is not trusted
 MAX_EXPECTED_ATE_M = 0.5  # m: the ATE the graph expects of itself, held by GNSS fixes or by loops, may be at most this
