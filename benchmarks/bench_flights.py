@@ -10,6 +10,8 @@ its own, and graded against the simulator's poses:
 
 * ``default``: the shipped default (the reference's flight, 700 m);
 * ``seedN-700``: the procedural scene of seed N, the shipped loop turned by 12 deg, at 700 m;
+  ``jitterN-700``: the same scene as a real tile holds it, a point somewhere in each 1 m cell rather than
+  at its centre, rebuilt into a surface as a LAS tile is;
 * ``sparse-150``: a 300 m square of the default scene resampled at a real tile's density (1.8
   points per m²) and rebuilt as a tile is, flown 150 m above its ground (the fitted loop of a tile, ``--laps`` times);
   ``sparseN-H``: the same of scene seed N, H m above its ground;
@@ -110,6 +112,10 @@ def build_flight(options: dict):
         seed = name.removeprefix("seed").split("-")[0]
         field = default_scene(seed=int(seed))
         xy, above = _turned(read_waypoints(DEFAULT_WAYPOINTS)[:, :2], field), None
+    elif name.startswith("jitter"):  # jitter11-700: scene seed 11 as a real tile holds it, the seedN-700 flight
+        seed = name.removeprefix("jitter").split("-")[0]
+        field = _jittered(default_scene(seed=int(seed)), int(seed))
+        xy, above = _turned(read_waypoints(DEFAULT_WAYPOINTS)[:, :2], field), None
     elif name.startswith("sparse"):  # sparse-150: the default scene's tile; sparse11-150: scene seed 11's
         seed = name.removeprefix("sparse").split("-")[0]
         field = sparse_tile(default_scene() if not seed else default_scene(seed=int(seed)))
@@ -122,7 +128,8 @@ def build_flight(options: dict):
         field, above = height_field_from_points(tile.points, tile.labels, MAP_CELL), float(name.split("-")[1])
         xy = _laps(fitted_loop(field), laps)
     else:
-        sys.exit(f"error: unknown flight {name!r}: use one of {', '.join(FLIGHTS)} (or seedN-700, sparseN-H, autzen-H)")
+        known = f"{', '.join(FLIGHTS)} (or seedN-700, jitterN-700, sparseN-H, autzen-H)"
+        sys.exit(f"error: unknown flight {name!r}: use one of {known}")
     if options["swing"]:
         xy = _swung(xy, options["swing"])
     ground = float(np.median(field.z[field.cell_of(xy)]))
@@ -134,6 +141,25 @@ def build_flight(options: dict):
                    IDENTITY_FRAME, sensor, name)  # fmt: skip
     config, _ = fit_to_flight(flight_of(data), Config(sensor=sensor), gnss=bool(options.get("gnss")))
     return data, with_settings(config, options["set"])
+
+
+def _jittered(field, seed: int):
+    """``field`` as a real tile holds it: one point in each 1 m cell, somewhere in the cell rather than at its
+    centre (the surface's height there, the cell's class), rebuilt into a 1 m surface as a LAS tile is."""
+    import numpy as np
+    from scipy.interpolate import RegularGridInterpolator
+
+    from helpers.sim.dataset import MAP_CELL
+    from helpers.sim.maps import height_field_from_points
+
+    x, y = field.grid()
+    centres = np.column_stack([x.ravel(), y.ravel()])
+    inside = np.random.default_rng(seed).uniform(-0.5, 0.5, centres.shape) * field.cell
+    lo = np.array([x[0, 0], y[0, 0]])
+    hi = np.array([x[0, -1], y[-1, 0]])
+    xy = np.clip(centres + inside, np.minimum(lo, hi), np.maximum(lo, hi))
+    z = RegularGridInterpolator((y[:, 0], x[0]), field.z)(xy[:, ::-1])
+    return height_field_from_points(np.column_stack([xy, z]), field.labels.ravel(), MAP_CELL)
 
 
 def with_settings(config, assignments):
