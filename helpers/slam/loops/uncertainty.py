@@ -34,13 +34,14 @@ answer refuses it under the exact one).
 On a long flight the graph grows without end, and so would the cost of
 eliminating it. Each computation therefore takes a window: the
 :data:`WINDOW_NODES` nodes nearest the anchor along the graph's edges (a
-breadth-first search over odometry steps, edges back and loop edges), with
-the edges among them. A graph with fewer edges is less sure, so a window's
-covariances err on the wide side, as a carried answer does. A node outside
-the window has no answer (NaN): the loop search leaves its place out. When
-no node of the window could be in reach (a first revisit, which only the
-long way round the graph joins to the scan), the whole graph is computed
-once for that anchor, as on a short flight.
+breadth-first search over odometry steps, edges back and loop edges,
+:func:`helpers.slam.loops.window.window_of`), with the edges among them. A
+graph with fewer edges is less sure, so a window's covariances err on the
+wide side, as a carried answer does. A node outside the window has no answer
+(NaN): the loop search leaves its place out. When no node of the window
+could be in reach (a first revisit, which only the long way round the graph
+joins to the scan), the whole graph is computed once for that anchor, as on
+a short flight.
 
 The graph is linearised at the odometry poses (they never change during a
 run). Loop edges enter it as plain Gaussians: a false loop would move the old
@@ -61,7 +62,6 @@ covariance of the offset alone would.
 from __future__ import annotations
 
 import time
-from collections import deque
 
 import gtsam
 import numpy as np
@@ -71,12 +71,12 @@ from helpers.errors import SlamError
 from helpers.geometry import adjoint
 from helpers.slam.graph.factors import Edge, edge_information, gaussian, pose3
 from helpers.slam.graph.information import swap_blocks
+from helpers.slam.loops.window import held_solve, matrices, window_of
 
 REFRESH_NODES = 12  # recompute the marginals once the chain since the last computation holds this many nodes
 WINDOW_NODES = 800  # the nodes a computation holds at most: the anchor's neighbourhood along the graph's edges
 ANCHOR_SIGMA = 1e-6  # the prior holding the anchor node: far stiffer than any edge, still well conditioned
 MIN_FIXES = 3  # GNSS fixes a window must hold before they, not the anchor's odometry pose, place it
-LOOSE_SIGMAS = np.array([1.0, 1.0, 1.0, 1e4, 1e4, 1e4])  # rad, m: a prior that only settles what fixes in a line leave
 
 
 class RelativeUncertainty:
@@ -265,26 +265,12 @@ class RelativeUncertainty:
         self._ends.append((min(edge.i, edge.j), max(edge.i, edge.j)))
         return information
 
-    def _window_of(self, anchor: int, whole: bool) -> np.ndarray:
-        """The nodes nearest ``anchor`` along the edges, at most ``window_nodes`` of them (all if ``whole``), sorted."""
-        if whole or self.num_nodes <= self.window_nodes:
-            return np.arange(self.num_nodes)
-        seen, queue = {anchor}, deque([anchor])
-        while queue and len(seen) < self.window_nodes:
-            node = queue.popleft()
-            for f in self._touching[node]:
-                for other in self._ends[f]:
-                    if other not in seen and len(seen) < self.window_nodes:
-                        seen.add(other)
-                        queue.append(other)
-        return np.array(sorted(seen))
-
     def _refresh(self, anchor: int, whole: bool = False) -> None:
         """The marginals of the window around node ``anchor`` (the whole graph
         if ``whole``), held at it; every cached answer is carried over to it
         (relative to the new anchor, through the chain since the old one)
         until a query wants it anew."""
-        window = self._window_of(anchor, whole)
+        window = window_of(anchor, self.num_nodes if whole else self.window_nodes, self._touching, self._ends)
         inside = np.zeros(self.num_nodes, dtype=bool)
         inside[window] = True
         graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
@@ -298,7 +284,7 @@ class RelativeUncertainty:
         held = len(fixed) >= MIN_FIXES  # the fixes, not the anchor's odometry pose, place the window
         to_anchor = np.eye(4)  # from the frame the graph is solved in to the one where the anchor is at its odometry
         if held:
-            values = self._held_by(graph, values, window, anchor, fixed)
+            values = held_solve(graph, values, window, anchor, fixed, self._held, self._pose3)
             to_anchor = self.poses[anchor] @ np.linalg.inv(values.atPose3(anchor).matrix())
             for factor in fixed:
                 graph.add(factor)
@@ -313,47 +299,12 @@ class RelativeUncertainty:
         carried = np.array([self._cached[c] for c in kept]).reshape(-1, 6, 6) + self._spread(kept)
         self._cached = dict(zip(kept.tolist(), carried, strict=True))
         self._solved = np.full((self.num_nodes, 4, 4), np.nan)
-        self._solved[window] = to_anchor @ _matrices(moved)
+        self._solved[window] = to_anchor @ matrices(moved)
         self._linear = np.zeros((0, 4, 4))  # no fixes: linearised at the odometry poses (see _about)
         if held:
             self._linear = np.array(self.poses)
-            self._linear[window] = to_anchor @ _matrices(values)
+            self._linear[window] = to_anchor @ matrices(values)
         self._anchor, self._exact, self._chain, self._due = anchor, set(), np.zeros((6, 6)), False
         self._window = inside
         self.refreshes += 1
         self.whole += whole and self.num_nodes > self.window_nodes
-
-    def _held_by(self, graph, values, window, anchor: int, fixed) -> gtsam.Values:
-        """The window where its edges and GNSS fixes put it (map frame): solved from the last such solution
-        (nodes it did not hold: chained from the node before by the odometry step)."""
-        guess: dict[int, gtsam.Pose3] = {}
-        start = gtsam.Values()
-        for node in map(int, window):
-            if node in self._held:
-                guess[node] = self._held[node]
-            elif node - 1 in guess or node - 1 in self._held:
-                before = guess.get(node - 1, self._held.get(node - 1))
-                guess[node] = before.compose(self._pose3[node - 1].between(self._pose3[node]))
-            else:
-                guess[node] = values.atPose3(node)
-            start.insert(node, guess[node])
-        held = gtsam.NonlinearFactorGraph(graph)
-        for factor in fixed:
-            held.add(factor)
-        held.add(gtsam.PriorFactorPose3(anchor, start.atPose3(anchor), gtsam.noiseModel.Diagonal.Sigmas(LOOSE_SIGMAS)))
-        try:
-            solved = gtsam.LevenbergMarquardtOptimizer(held, start, gtsam.LevenbergMarquardtParams()).optimize()
-        except RuntimeError as exc:
-            raise SlamError(f"the loop search's graph cannot be solved with its GNSS fixes: {exc}") from None
-        for node in window:
-            self._held[int(node)] = solved.atPose3(int(node))
-        return solved
-
-
-def _matrices(values: gtsam.Values) -> np.ndarray:
-    """(K, 4, 4) the poses of ``values``, sorted by key."""
-    rows = gtsam.utilities.extractPose3(values)  # rows [R (9, row by row), t (3)], sorted keys
-    out = np.tile(np.eye(4), (len(rows), 1, 1))
-    out[:, :3, :3] = rows[:, :9].reshape(-1, 3, 3)
-    out[:, :3, 3] = rows[:, 9:12]
-    return out
