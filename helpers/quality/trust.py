@@ -100,7 +100,14 @@ from helpers.quality.graph_checks import (
     loops_off_the_rest,
 )
 from helpers.quality.trust_facts import CORRECTION_FLOOR_M, MAX_CORRECTION_SHARE, WEAK_SIGMA_M, facts_of
-from helpers.quality.trust_rules import BLIND_RUN_STEPS, MAX_EXPECTED_ATE_M, MAX_FALLBACK_SHARE, RULES, scale_unvouched
+from helpers.quality.trust_rules import (
+    BLIND_RUN_STEPS,
+    MAX_EXPECTED_ATE_M,
+    MAX_FALLBACK_SHARE,
+    RULES,
+    scale_observed,
+    scale_unvouched,
+)
 
 __all__ = [
     "BLIND_RUN_STEPS",
@@ -180,7 +187,7 @@ class Health:
         unobserved, with what a bias of 1 % of the step lengths would move it by unseen."""
         c = self.counts
         sigma, per_pct, lever = c["loop_scale_sigma_pct"], c["moved_per_scale_pct_m"], c["longest_loop_lever_m"]
-        if sigma is not None and sigma * per_pct <= MAX_EXPECTED_ATE_M:
+        if scale_observed(c):
             return f"; the loops observe the flight's scale to a sigma of {sigma:.2g} % (levers up to {lever:.0f} m)"
         seen = (
             "no loop observes the flight's scale"

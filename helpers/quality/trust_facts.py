@@ -134,16 +134,18 @@ def fixed_sigma_edges(result) -> int:
     (``graph_weights = "hessian"``): they came without it (:func:`helpers.slam.graph.factors.edge_information`)."""
     if result.config.pose_graph.graph_weights != "hessian":
         return 0
-    odometry = result.odometry
-    steps = odometry.information if len(odometry.information) == len(odometry.relative) else []
-    steps = steps or [None] * len(odometry.relative)
+    steps = step_informations(result.odometry)
     edges = [*steps, *(e.information for e in result.extra_edges), *(loop.information for loop in result.loops)]
     return sum(information is None for information in edges)
 
 
 def weak_sigmas(odometry) -> np.ndarray:
     """(K-1,) sigma (m) of each odometry step along the direction it pins least (nan: no information)."""
-    informations = odometry.information or [None] * len(odometry.relative)
-    if len(informations) != len(odometry.relative):
-        informations = [None] * len(odometry.relative)
-    return np.array([np.nan if info is None else weakest(info)[0] for info in informations], dtype=float)
+    return np.array([np.nan if info is None else weakest(info)[0] for info in step_informations(odometry)], dtype=float)
+
+
+def step_informations(odometry) -> list:
+    """(K-1,) each odometry step's calibrated information, or None: all None when the odometry kept none, or
+    not one a step."""
+    steps = len(odometry.relative)
+    return list(odometry.information) if len(odometry.information) == steps else [None] * steps

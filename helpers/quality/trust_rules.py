@@ -173,6 +173,14 @@ SPARSE_CANOPY_BIAS_PCT = 2.0  # %: how short the odometry's steps came out over 
 # roofs and open ground under 0.1 %. Said in the message only: the rule reads what the loops observe, not this.
 
 
+def scale_observed(counts: dict) -> bool:
+    """Whether the loops observe the flight's scale (``counts`` as :func:`helpers.quality.trust_facts.facts_of`
+    gives them): a scale error of the sigma they leave moves the trajectory by at most
+    :data:`MAX_EXPECTED_ATE_M`."""
+    sigma = counts["loop_scale_sigma_pct"]
+    return sigma is not None and sigma * counts["moved_per_scale_pct_m"] <= MAX_EXPECTED_ATE_M
+
+
 def scale_unvouched(run: Facts) -> str:
     """Why a lidar-only run cannot vouch for its scale, or '' when it can: the loops observe the scale when an
     error of the sigma they leave it (:func:`helpers.quality.graph_checks.loop_scale`) moves the trajectory by at
@@ -181,7 +189,7 @@ def scale_unvouched(run: Facts) -> str:
     shrunk alike, and every rule and loop agrees with it."""
     counts = run.counts
     sigma, per_pct = counts["loop_scale_sigma_pct"], counts["moved_per_scale_pct_m"]
-    if run.held or (sigma is not None and sigma * per_pct <= MAX_EXPECTED_ATE_M):
+    if run.held or scale_observed(counts):
         return ""
     seen = (
         "no loop observes the flight's scale"

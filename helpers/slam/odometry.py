@@ -26,7 +26,7 @@ from helpers.geometry import check_pose, transform_points
 from helpers.progress import progress_bar
 from helpers.slam.deskew import per_period
 from helpers.slam.motion_guard import beyond, offset
-from helpers.slam.preprocess import Frame, describe, prepare, prepare_scan, reads_ahead
+from helpers.slam.preprocess import Frame, describe, empty_first_scan, prepare, prepare_scan, reads_ahead
 from helpers.slam.registration.features import grid_average
 from helpers.slam.registration.icp import icp_cloud
 from helpers.slam.registration.icp_service import IcpService
@@ -275,7 +275,7 @@ def run_odometry(dataset_or_scans, first_pose=None, config: Config | None = None
         if frame is not None:
             odometry.register(frame, index)
         elif index == indices[0]:
-            raise SlamError(f"scan {index}, the first, holds no point: the flight must begin over ground it sees")
+            raise empty_first_scan(index)
         # else: a scan that holds no point is left out, and the next step spans it (as Slam does)
 
     if not reads_ahead(config):

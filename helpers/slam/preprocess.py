@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from helpers.config.tables import Config
+from helpers.errors import SlamError
 from helpers.geometry import check_points
 from helpers.slam.registration.features import BINS, HISTOGRAMS, grid_average, keypoint_fpfh
 from helpers.slam.registration.icp import IcpCloud, icp_cloud
@@ -56,6 +57,11 @@ def prepare(scan: np.ndarray, config: Config) -> Frame:
     timings["icp"] = elapsed_ms(start)
     frame = Frame(points, None, icp_points, timings, icp)
     return frame if registration.mode == "tracking" else describe(frame, config)
+
+
+def empty_first_scan(index: int) -> SlamError:
+    """The error of a flight whose first scan, which anchors it, holds no point (a later one is left out)."""
+    return SlamError(f"scan {index}, the first, holds no point: the flight must begin over ground it sees")
 
 
 def prepare_scan(scan: np.ndarray, index: int, config: Config) -> Frame | None:

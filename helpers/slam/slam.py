@@ -39,7 +39,7 @@ from helpers.slam.graph.optimizer import OptimizationResult
 from helpers.slam.loops.closer import LoopCloser, LoopQuery
 from helpers.slam.loops.places import PlaceRecognition
 from helpers.slam.odometry import Odometry, OdometryResult
-from helpers.slam.preprocess import prepare_scan
+from helpers.slam.preprocess import empty_first_scan, prepare_scan
 from helpers.slam.registration.features import grid_average
 from helpers.slam.registration.icp_service import IcpService
 from helpers.slam.submaps import SubmapIndex, build_submap
@@ -198,11 +198,12 @@ class Slam:
         node = len(self.indices)
         # 1. Odometry: register the scan onto the previous accepted one (prepared once, for every stage).
         with self._timed("odometry"):
+            frame = None  # with a given odometry nothing is registered, and no scan prepared
             if self.given is None:
-                prepared = prepared.result() if prepared is not None else prepare_scan(scan, index, self.config)
-                if prepared is None:  # a scan that holds no point: left out, the next step spans it
+                frame = prepared.result() if prepared is not None else prepare_scan(scan, index, self.config)
+                if frame is None:  # a scan that holds no point: left out, the next step spans it
                     return self._left_out(index)
-            frame, cloud, fallback, information = self._register(scan, index, prepared)
+            frame, cloud, fallback, information = self._register(scan, index, frame)
             self.clouds.append(cloud)
             self.indices.append(int(index))
         poses, relative = self._trajectory()
@@ -223,7 +224,7 @@ class Slam:
         """Scan ``index`` held no point: recorded, and the odometry's next step spans it (its guess the last
         motion for each scan left out); the first scan anchors the flight, and must hold points."""
         if not self.indices:
-            raise SlamError(f"scan {index}, the first, holds no point: the flight must begin over ground it sees")
+            raise empty_first_scan(index)
         self.empty.append(int(index))
         log.warning("scan %d holds no point: left out, the next step spans it", index)
         return Step(index, accepted=False)
